@@ -1,0 +1,95 @@
+"""Equations of motion of one ball on the rim of the ABU (report ch. 3 and app. A, checked).
+
+Generalised coordinates beta (ball angle relative to the ABU) and theta (ABU angle); the
+radial coordinate l is held by the normal force. With c = m l^2 - J 2l/d = m l (l - d/5) and
+M = m l^2 + J (2l/d)^2 = 1.4 m l^2 the equations are
+
+    J_abu theta'' [+ (m l^2 + J) theta'' + c beta''] = T          (rotor; [..] = ball reaction)
+    c theta'' + M beta'' = -l F_w                                 (ball)
+    F_N = m [ l (theta' + beta')^2 + 0.4 l beta'^2 - 0.2 d theta' beta' ]
+
+with F_w the friction force, opposing positive beta' when positive:
+
+* stick (beta' = beta'' = 0): F_w = -c alpha / l, held while |F_w| <= mu F_N;
+* slip in direction s = sign(beta'): F_w = mu_d F_N s.
+
+Without the ball reaction (the report's model) the rotor obeys J_abu theta'' = T alone.
+All functions take and return SI values.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .params import BallParams, PlantParams
+
+STICK = 0
+
+
+def normal_force(ball: BallParams, omega: float, beta_dot: float) -> float:
+    """Normal force of the rim on the ball [N] (positive = pressing the ball inwards)."""
+    m, l, d = ball.m, ball.l, ball.d
+    return m * (l * (omega + beta_dot) ** 2 + 0.4 * l * beta_dot**2 - 0.2 * d * omega * beta_dot)
+
+
+def stick_friction(ball: BallParams, alpha: float) -> float:
+    """Friction force that keeps the ball in stick at rotor acceleration alpha [N]."""
+    return -ball.coupling * alpha / ball.l
+
+
+def mu_required(ball: BallParams, alpha: float, omega: float) -> float:
+    """mu_req = (l - d/5) |alpha| / (l omega^2) [-], eq. 4.1/4.2/5.3 (inf at omega = 0)."""
+    if omega == 0.0:
+        return math.inf if alpha != 0.0 else 0.0
+    return ball.lever_ratio * abs(alpha) / (omega * omega)
+
+
+def stick_alpha(plant: PlantParams, torque: float) -> float:
+    """Rotor acceleration while the ball sticks [rad/s^2] for the applied torque [N m]."""
+    return torque / plant.J_total
+
+
+@dataclass(frozen=True)
+class Accelerations:
+    """Accelerations and contact forces at one instant (SI)."""
+
+    alpha: float          #: rotor acceleration theta'' [rad/s^2]
+    beta_ddot: float      #: ball acceleration relative to the ABU [rad/s^2]
+    normal_force: float   #: F_N [N]
+    friction_force: float  #: F_w [N]
+
+
+def accelerations(plant: PlantParams, torque: float, omega: float, beta_dot: float,
+                  mode: int) -> Accelerations:
+    """Accelerations for the applied torque [N m] in ``mode`` (0 stick, +1/-1 slip direction)."""
+    ball = plant.ball
+    if mode == STICK:
+        alpha = stick_alpha(plant, torque)
+        return Accelerations(alpha, 0.0, normal_force(ball, omega, 0.0),
+                             stick_friction(ball, alpha))
+    f_n = normal_force(ball, omega, beta_dot)
+    f_w = ball.mu_dynamic * f_n * mode
+    c, M, l = ball.coupling, ball.M_bb, ball.l
+    if plant.ball_reaction:
+        # [J_tot c; c M] [alpha; beta''] = [T; -l F_w]
+        J_tot = plant.J_total
+        det = J_tot * M - c * c
+        alpha = (M * torque + c * l * f_w) / det
+        beta_ddot = (-J_tot * l * f_w - c * torque) / det
+    else:
+        alpha = torque / plant.J_abu
+        beta_ddot = -(c * alpha + l * f_w) / M
+    return Accelerations(alpha, beta_ddot, f_n, f_w)
+
+
+def stick_holds(plant: PlantParams, torque: float, omega: float, rtol: float = 1e-12) -> bool:
+    """Whether static friction can hold the ball at beta' = 0 for the applied torque."""
+    ball = plant.ball
+    f_w = stick_friction(ball, stick_alpha(plant, torque))
+    return abs(f_w) <= ball.mu * normal_force(ball, omega, 0.0) * (1.0 + rtol)
+
+
+def slip_direction(plant: PlantParams, torque: float) -> int:
+    """Direction (+1/-1) in which a ball leaving stick moves: sign of the friction it would need."""
+    f_w = stick_friction(plant.ball, stick_alpha(plant, torque))
+    return 1 if f_w > 0.0 else -1

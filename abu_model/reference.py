@@ -1,0 +1,264 @@
+"""Monolithic reference solver: the whole closed loop as one event-located SciPy ODE, no FMI.
+
+Used to cross-check the co-simulation. It shares the equations of motion
+(:mod:`.dynamics`) with the FMU but not the stepping: here the controller, the setpoint and
+the plant are one ODE (state theta, omega, beta, beta', x_I, applied torque) integrated by
+``solve_ivp`` between setpoint steps, with event functions for the stick test
+(mu omega^2 -/+ (l - d/5)/l alpha = 0) in stick and for beta' = 0 in slip.
+
+The controller and the setpoint are passed duck-typed (objects with ``Kp``, ``Ki``,
+``theta_ref_mode`` and with ``step_times``, ``levels``), so this package stays free of
+imports from ``controller``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .dynamics import accelerations, mu_required, slip_direction, stick_holds
+from .params import PlantParams
+from .plant import Mode, SimulationError, Switch
+
+RTOL, ATOL = 1e-11, 1e-13
+
+
+class SpeedLaw(Protocol):
+    Kp: float
+    Ki: float
+    theta_ref_mode: str
+
+
+class Setpoints(Protocol):
+    step_times: Sequence[float]
+    levels: Sequence[float]
+
+
+@dataclass
+class ReferenceResult:
+    """Trajectory and bounds of a reference run (SI).
+
+    ``t`` and the state arrays hold every solver point; at a discontinuity the time appears
+    twice (left limit first). ``mu_req`` is evaluated with the right-hand acceleration.
+    """
+
+    t: np.ndarray
+    theta: np.ndarray
+    omega: np.ndarray
+    beta: np.ndarray
+    beta_dot: np.ndarray
+    alpha: np.ndarray
+    mode: np.ndarray
+    mu_req: np.ndarray
+    switches: list[Switch] = field(default_factory=list)
+    mu_low: float = 0.0          #: largest mu_req while stuck before the first slip [-]
+    mu_high: float | None = None  #: mu_req right after the first slip instant [-]
+    t_slip: float | None = None   #: first stick -> slip time [s]
+    omega_slip: float | None = None  #: [rad/s]
+    alpha_slip: float | None = None  #: right-hand alpha at the slip instant [rad/s^2]
+
+
+def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
+              t_start: float, t_end: float, y0: np.ndarray, max_step: float) -> ReferenceResult:
+    """Integrate the hybrid system driven by ``drive`` (commanded torque [N m] and x_I')."""
+    ball, tm = plant.ball, plant.tau_motor
+    k = ball.lever_ratio
+    y = np.array(y0, dtype=float)
+    mode = Mode.STICK if y[3] == 0.0 else int(math.copysign(1, y[3]))
+    times: list[float] = []
+    states: list[np.ndarray] = []
+    modes: list[int] = []
+    alphas: list[float] = []
+    switches: list[Switch] = []
+
+    for t_a, t_stop in _segments(breakpoints, t_start, t_end):
+        # The drive is frozen on each segment (the setpoint level at its start), so no
+        # solver stage sees the jump at the segment's end.
+        command = drive.segment(t_a)
+
+        def applied(t, y):
+            return command.torque(t, y) if tm == 0.0 else y[5]
+
+        def record(t, y, mode):
+            times.append(t), states.append(np.array(y)), modes.append(int(mode))
+            alphas.append(accelerations(plant, applied(t, y), y[1], y[3], mode).alpha)
+
+        def rhs_for(mode):
+            def rhs(t, y):
+                acc = accelerations(plant, applied(t, y), y[1], y[3], mode)
+                d_applied = 0.0 if tm == 0.0 else (command.torque(t, y) - y[5]) / tm
+                return [y[1], acc.alpha, y[3] if mode else 0.0, acc.beta_ddot if mode else 0.0,
+                        command.integral_rate(t, y), d_applied]
+            return rhs
+
+        def stick_margin(sign):
+            def g(t, y):
+                return ball.mu * y[1] ** 2 - sign * k * applied(t, y) / plant.J_total
+            g.terminal, g.direction = True, -1
+            return g
+
+        def slip_stop(direction):
+            def g(t, y):
+                return direction * y[3]
+            g.terminal, g.direction = True, -1
+            return g
+
+        def switch(t, y, new):
+            nonlocal mode
+            switches.append(Switch(float(t), int(mode), int(new)))
+            mode = new
+            record(t, y, mode)
+            if len(switches) > 10000:
+                raise SimulationError("more than 10000 stick/slip switches: chattering")
+
+        t = t_a
+        record(t, y, mode)  # right limit at the segment start
+        while t < t_stop:
+            if mode == Mode.STICK and not stick_holds(plant, applied(t, y), y[1]):
+                switch(t, y, slip_direction(plant, applied(t, y)))
+                continue
+            events = ([stick_margin(1.0), stick_margin(-1.0)] if mode == Mode.STICK
+                      else [slip_stop(mode)])
+            sol = solve_ivp(rhs_for(mode), (t, t_stop), y, method="DOP853", rtol=RTOL,
+                            atol=ATOL, events=events, max_step=max_step)
+            if not sol.success:
+                raise SimulationError(f"reference integration failed at t = {t:.9g} s: "
+                                      f"{sol.message}")
+            hits = [(te[0], ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
+            t_next = min(h[0] for h in hits) if hits else t_stop
+            for ti, yi in zip(sol.t, sol.y.T):
+                if t < ti < t_next:
+                    record(ti, yi, mode)
+            if not hits:
+                t, y = t_stop, sol.y[:, -1].copy()
+                record(t, y, mode)  # left limit at the segment end
+                break
+            t_hit, y_hit = min(hits, key=lambda item: item[0])
+            t, y = float(t_hit), np.array(y_hit, dtype=float)
+            record(t, y, mode)
+            if mode == Mode.STICK:
+                switch(t, y, slip_direction(plant, applied(t, y)))
+            else:
+                y[3] = 0.0
+                switch(t, y, Mode.STICK if stick_holds(plant, applied(t, y), y[1])
+                       else slip_direction(plant, applied(t, y)))
+
+    Y = np.array(states)
+    alpha = np.array(alphas)
+    mm = np.array(modes)
+    mu_req = np.array([mu_required(ball, a, w) for a, w in zip(alpha, Y[:, 1])])
+    result = ReferenceResult(np.array(times), Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], alpha, mm,
+                             mu_req, switches)
+    _bounds(result)
+    return result
+
+
+def _segments(breakpoints: Sequence[float], t_start: float, t_end: float):
+    """Consecutive (start, end) intervals of [t_start, t_end] split at the breakpoints."""
+    cuts = [t_start] + sorted(b for b in breakpoints if t_start < b < t_end) + [t_end]
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def _bounds(result: ReferenceResult) -> None:
+    """mu_low, mu_high and the slip instant from the recorded points.
+
+    Records at the slip instant come in the order [left limit,] right limit (stick mode,
+    the new acceleration), switch (slip mode). mu_high is mu_req at the right limit; mu_low
+    is the largest mu_req of the stick records before it, and includes the right limit itself
+    when the slip is continuous (no jump of alpha there), where mu_low = mu_high = mu.
+    """
+    first = next((s for s in result.switches if s.from_mode == Mode.STICK), None)
+    stuck = result.mode == Mode.STICK
+    if first is None:
+        result.mu_low = float(result.mu_req[stuck].max()) if stuck.any() else 0.0
+        return
+    at_slip = np.nonzero(result.t == first.time)[0]
+    i_switch = int(at_slip[result.mode[at_slip] != Mode.STICK][0])
+    j = i_switch - 1  # right limit at the slip instant
+    earlier = stuck & (np.arange(len(result.t)) < j)
+    jump = j > 0 and result.t[j - 1] == first.time and result.alpha[j - 1] != result.alpha[j]
+    if not jump:
+        earlier[j] = True
+    result.mu_low = float(result.mu_req[earlier].max()) if earlier.any() else 0.0
+    result.t_slip = first.time
+    result.omega_slip = float(result.omega[j])
+    result.alpha_slip = float(result.alpha[j])
+    result.mu_high = float(result.mu_req[j])
+
+
+class _Segment(Protocol):
+    def torque(self, t: float, y: np.ndarray) -> float: ...
+    def integral_rate(self, t: float, y: np.ndarray) -> float: ...
+
+
+class _Drive(Protocol):
+    def segment(self, t: float) -> _Segment: ...
+
+
+@dataclass(frozen=True)
+class _PISegment:
+    """The PI law on one constant setpoint level w_ref [rad/s]."""
+
+    law: SpeedLaw
+    w_ref: float
+
+    def torque(self, t: float, y: np.ndarray) -> float:
+        e = y[4] if self.law.theta_ref_mode == "integral" else t * self.w_ref - y[0]
+        return self.law.Kp * (self.w_ref - y[1]) + self.law.Ki * e
+
+    def integral_rate(self, t: float, y: np.ndarray) -> float:
+        return self.w_ref - y[1]
+
+
+class _PIStaircaseDrive:
+    """The PI law on the staircase: constant setpoint between steps (right-continuous)."""
+
+    def __init__(self, law: SpeedLaw, setpoints: Setpoints):
+        self.law = law
+        self.times = np.asarray(setpoints.step_times, dtype=float)
+        self.levels = np.asarray(setpoints.levels, dtype=float)
+
+    def segment(self, t: float) -> _PISegment:
+        return _PISegment(self.law, float(self.levels[np.searchsorted(self.times, t, "right")]))
+
+
+def simulate_staircase_reference(plant: PlantParams, law: SpeedLaw, setpoints: Setpoints,
+                                 t_end: float, *, t_start: float = 0.0, beta0: float = 0.0,
+                                 max_step: float = 0.01) -> ReferenceResult:
+    """The staircase experiment (report sec. 4.2) as one ODE.
+
+    Starts in steady rotation at the staircase's first level with the ball stuck at beta0 and
+    the controller's integrator at 0. ``t_end`` [s]; ``max_step`` [s] bounds the solver
+    step so that mu_low (a maximum over the stick period) is sampled densely.
+    """
+    omega0 = float(setpoints.levels[0])
+    y0 = np.array([omega0 * t_start, omega0, beta0, 0.0, 0.0, 0.0])
+    return _simulate(plant, _PIStaircaseDrive(law, setpoints), list(setpoints.step_times),
+                     t_start, t_end, y0, max_step)
+
+
+class _RampDrive:
+    """Torque that gives alpha = sign(omega0) K t on the stuck rotor (smooth: one segment)."""
+
+    def __init__(self, plant: PlantParams, jerk: float, omega0: float):
+        self.gain = plant.J_total * jerk * math.copysign(1.0, omega0)
+
+    def segment(self, t: float) -> "_RampDrive":
+        return self
+
+    def torque(self, t: float, y: np.ndarray) -> float:
+        return self.gain * t
+
+    def integral_rate(self, t: float, y: np.ndarray) -> float:
+        return 0.0
+
+
+def simulate_ramp_reference(plant: PlantParams, omega0: float, jerk: float, t_end: float, *,
+                            beta0: float = 0.0, max_step: float = 0.01) -> ReferenceResult:
+    """The prescribed-motion experiment (report sec. 4.1): alpha grows at ``jerk`` [rad/s^3]
+    in the direction of omega0 [rad/s] from 0, over [0, t_end] s."""
+    y0 = np.array([0.0, omega0, beta0, 0.0, 0.0, 0.0])
+    return _simulate(plant, _RampDrive(plant, jerk, omega0), [], 0.0, t_end, y0, max_step)
