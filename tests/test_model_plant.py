@@ -1,0 +1,129 @@
+"""The stepped plant: exact switch location, re-stick, state restore, lag and ball-reaction options."""
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from abu_model.params import BallParams, PlantParams
+from abu_model.plant import AbuPlant, Mode
+from abu_model.reference import simulate_ramp_reference
+
+HZ = 2 * math.pi
+
+
+def ramp_root(ball, omega0, jerk):
+    """First root of (l - d/5) K t = mu l (|w0| + K t^2/2)^2 (closed-form ramp motion)."""
+    f = lambda t: (ball.l - ball.d / 5) * jerk * t - ball.mu * ball.l * (abs(omega0) + 0.5 * jerk * t * t) ** 2
+    grid = np.linspace(0.0, 20.0, 200001)
+    i = int(np.nonzero(f(grid) > 0)[0][0])
+    return brentq(f, grid[i - 1], grid[i], xtol=1e-15)
+
+
+def run_ramp(plant_params, omega0, jerk, t_end, h, stop_after=None):
+    plant = AbuPlant(plant_params, omega0=omega0)
+    gain = plant_params.J_total * jerk * math.copysign(1, omega0)
+    switches, beta_dot_stick = [], []
+    n = int(round(t_end / h))
+    for i in range(n):
+        t = i * h
+        switches += plant.advance(h, gain * t, gain)
+        if plant.state.mode == Mode.STICK:
+            beta_dot_stick.append(plant.state.beta_dot)
+        if stop_after and len(switches) >= stop_after and t > switches[-1].time + 0.2:
+            break
+    return plant, switches, beta_dot_stick
+
+
+@pytest.mark.parametrize("mu, jerk", [(2.75e-3, 200.0), (1e-2, 2000.0), (3e-2, 20000.0)])
+def test_ramp_slip_time_is_the_closed_form_root_and_ball_sticks_again(mu, jerk):
+    params = PlantParams(ball=BallParams(mu=mu))
+    omega0 = -20 * HZ
+    t_root = ramp_root(params.ball, omega0, jerk)
+    plant, switches, beta_dot_stick = run_ramp(params, omega0, jerk, 10.0, 1e-3, stop_after=2)
+    assert switches[0].from_mode == Mode.STICK and switches[0].to_mode == Mode.SLIP_POS
+    assert abs(switches[0].time - t_root) < 1e-9
+    # one slip episode: stick -> slip -> stick, no chattering, beta' exactly 0 in stick
+    assert [(s.from_mode, s.to_mode) for s in switches] == [(0, 1), (1, 0)]
+    assert all(v == 0.0 for v in beta_dot_stick)
+    assert plant.state.beta > 0  # accelerating clockwise makes beta grow (report sec. 4.1)
+
+
+def test_plant_agrees_with_monolithic_reference_on_ramp():
+    params = PlantParams(ball=BallParams(mu=5e-3))
+    plant, switches, _ = run_ramp(params, -15 * HZ, 500.0, 2.0, 1e-3)
+    ref = simulate_ramp_reference(params, -15 * HZ, 500.0, 2.0)
+    assert len(ref.switches) == len(switches) == 2
+    for a, b in zip(switches, ref.switches):
+        assert a.time == pytest.approx(b.time, abs=1e-8)
+    assert plant.state.beta == pytest.approx(ref.beta[-1], rel=1e-7)
+
+
+def test_stick_step_is_exact_polynomial_motion():
+    params = PlantParams()
+    plant = AbuPlant(params, omega0=-100.0, theta0=1.0)
+    T0, Td, h = 1e-4, -2e-3, 0.05
+    plant.advance(h, T0, Td)
+    J = params.J_total
+    assert plant.state.omega == pytest.approx(-100.0 + (T0 * h + Td * h * h / 2) / J, rel=1e-14)
+    assert plant.state.theta == pytest.approx(1.0 - 100.0 * h + (T0 * h * h / 2 + Td * h**3 / 6) / J, rel=1e-13)
+    assert plant.state.mode == Mode.STICK
+
+
+def test_restore_state_and_continue_is_bit_identical():
+    params = PlantParams(ball=BallParams(mu=3e-3), tau_motor=0.0)
+    plant, _, _ = run_ramp(params, -20 * HZ, 300.0, 0.2, 1e-3)
+    saved = plant.get_state()
+    gain = params.J_total * 300.0 * -1
+
+    def continue_run():
+        out = []
+        for i in range(400):
+            t = 0.2 + i * 1e-3
+            plant.advance(1e-3, gain * t, gain)
+            s = plant.state
+            out.append((s.theta, s.omega, s.beta, s.beta_dot, s.mode, s.switch_count, s.t_last_switch))
+        return out
+
+    first = continue_run()
+    assert first[-1][5] >= 1  # the continuation crosses at least one switch
+    plant.set_state(saved)
+    assert continue_run() == first
+
+
+def test_motor_lag_zero_is_the_report_model_and_lag_delays_the_torque():
+    base = PlantParams(ball=BallParams(mu=3e-3))
+    # tau_motor = 0: applied torque follows the command at once
+    plant = AbuPlant(base, omega0=-100.0)
+    plant.advance(1e-3, 2e-3, 0.0)
+    assert plant.outputs(2e-3).alpha == pytest.approx(2e-3 / base.J_abu, rel=1e-14)
+    # tau_motor > 0: first-order lag, applied torque = T (1 - exp(-t/tau)) after a step
+    lagged = PlantParams(ball=BallParams(mu=3e-3), tau_motor=0.01)
+    plant = AbuPlant(lagged, omega0=-100.0)
+    assert plant.outputs(2e-3).alpha == 0.0  # no jump of alpha at the torque step
+    plant.advance(0.01, 2e-3, 0.0)
+    assert plant.state.torque_applied == pytest.approx(2e-3 * (1 - math.exp(-1)), rel=1e-12)
+    expected_omega = -100.0 + 2e-3 / lagged.J_abu * (0.01 - 0.01 * (1 - math.exp(-1)))
+    assert plant.state.omega == pytest.approx(expected_omega, rel=1e-12)
+
+
+def test_lagged_ramp_slip_is_located_on_the_lagged_trajectory():
+    params = PlantParams(ball=BallParams(mu=2.75e-3), tau_motor=0.02)
+    b, J, K, w0 = params.ball, params.J_total, 200.0, -20 * HZ
+    plant, switches, _ = run_ramp(params, w0, K, 0.6, 1e-3)
+    # commanded T = -J K t through the lag: applied = -J K (t - tau (1 - e^{-t/tau}))
+    tau = 0.02
+    alpha = lambda t: -K * (t - tau * (1 - math.exp(-t / tau)))
+    omega = lambda t: w0 - K * (t * t / 2 - tau * t + tau * tau * (1 - math.exp(-t / tau)))
+    f = lambda t: b.lever_ratio * abs(alpha(t)) - b.mu * omega(t) ** 2
+    root = brentq(f, 0.1, 0.5, xtol=1e-15)
+    assert switches[0].time == pytest.approx(root, abs=1e-9)
+
+
+def test_ball_reaction_slows_the_rotor_by_the_ball_inertia():
+    off, on = PlantParams(), PlantParams(ball_reaction=True)
+    a_off = AbuPlant(off, omega0=-100.0).outputs(1e-3).alpha
+    a_on = AbuPlant(on, omega0=-100.0).outputs(1e-3).alpha
+    b = on.ball
+    assert a_off / a_on == pytest.approx(1 + (b.m * b.l**2 + b.J) / on.J_abu, rel=1e-14)
+    assert 0 < 1 - a_on / a_off < 1e-3
