@@ -158,7 +158,9 @@ def _read_tiff(p: Path) -> Recording:
     except RecordingError:
         raise
     except Exception as exc:  # tifffile raises many types on corrupt files
-        raise RecordingError(f"cannot read TIFF '{p}': {exc}") from None
+        frames = _cv2_read_multi(p)  # e.g. LZW compression without the imagecodecs package
+        if frames is None:
+            raise RecordingError(f"cannot read TIFF '{p}': {exc}") from None
     frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
     return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}")
 
@@ -172,6 +174,33 @@ def _raise_differing_pages(p: Path, tif) -> None:
                 f"TIFF '{p}': frame {i} has shape {page.shape} and dtype {page.dtype}, frame 0 "
                 f"has shape {first.shape} and dtype {first.dtype}; all frames must match")
     raise RecordingError(f"TIFF '{p}' holds several image series; expected one stack of frames")
+
+
+def _cv2_read(f: Path) -> np.ndarray | None:
+    import cv2
+
+    return cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+
+
+def _cv2_read_multi(p: Path) -> np.ndarray | None:
+    """All pages of a TIFF via OpenCV (fallback for codecs tifffile lacks); None on failure."""
+    import cv2
+
+    ok, pages = cv2.imreadmulti(str(p), flags=cv2.IMREAD_UNCHANGED)
+    if not ok or not pages:
+        return None
+    first = pages[0]
+    for i, page in enumerate(pages):
+        if page.ndim != 2:
+            raise RecordingError(f"TIFF '{p}': frame {i} is a colour image of shape {page.shape};"
+                                 " expected 8-bit grayscale")
+        if page.dtype != np.uint8:
+            raise RecordingError(f"TIFF '{p}': frame {i} has dtype {page.dtype}; expected 8-bit "
+                                 "grayscale (uint8)")
+        if page.shape != first.shape:
+            raise RecordingError(f"TIFF '{p}': frame {i} has shape {page.shape}, frame 0 has "
+                                 f"shape {first.shape}; all frames must match")
+    return np.stack(pages)
 
 
 def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None) -> np.ndarray:
@@ -189,11 +218,11 @@ def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None) -> np
         except RecordingError:
             raise
         except Exception as exc:
-            raise RecordingError(f"{label} is unreadable: {exc}") from None
+            img = _cv2_read(f)  # e.g. LZW compression without the imagecodecs package
+            if img is None:
+                raise RecordingError(f"{label} is unreadable: {exc}") from None
     else:
-        import cv2
-
-        img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+        img = _cv2_read(f)
         if img is None:
             raise RecordingError(f"{label} is unreadable (not a valid image file)")
     if img.ndim != 2:
@@ -219,12 +248,37 @@ def _read_folder(p: Path) -> Recording:
                              " files or one .npy stack)")
     if len(images) == 1 and images[0].suffix.lower() in TIFF_SUFFIXES:
         return _read_tiff(images[0])  # a single (possibly multi-page) TIFF: the stack itself
+    _check_numbering(p, images)
     first = _read_single_frame(images[0], 0, None)
     frames = np.empty((len(images),) + first.shape, dtype=np.uint8)
     frames[0] = first
     for i, f in enumerate(images[1:], start=1):
         frames[i] = _read_single_frame(f, i, first.shape)
     return Recording(frames, f"folder of {len(images)} frames {p}", [f.name for f in images])
+
+
+def _check_numbering(p: Path, images: list[Path]) -> None:
+    """If the frames are numbered (``<prefix><number><suffix>``), the numbers must be consecutive.
+
+    A gap means a frame is missing, which would silently shift the time base of every later
+    frame; a repeated number means two files claim the same frame.
+    """
+    parsed = [re.fullmatch(r"(.*?)(\d+)(\D*)", f.name) for f in images]
+    if len(images) < 2 or not all(parsed):
+        return
+    stems = {(m.group(1), m.group(3).lower()) for m in parsed}
+    if len(stems) != 1:
+        return  # not one numbered series: keep the natural order only
+    numbers = [int(m.group(2)) for m in parsed]
+    for i in range(1, len(numbers)):
+        if numbers[i] == numbers[i - 1]:
+            raise RecordingError(f"folder '{p}': '{images[i - 1].name}' and '{images[i].name}' "
+                                 f"both claim frame number {numbers[i]}")
+        if numbers[i] != numbers[i - 1] + 1:
+            missing = numbers[i - 1] + 1
+            raise RecordingError(
+                f"folder '{p}': frame number {missing} is missing (between '{images[i - 1].name}'"
+                f" and '{images[i].name}'); frames must be numbered consecutively")
 
 
 def _read_video(p: Path) -> Recording:

@@ -1,0 +1,160 @@
+"""Reading and writing recordings: round trips and clear errors naming the file and frame."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+import tifffile
+
+from abu_model.errors import AbuError
+from measurement.frames_io import (Recording, RecordingError, read_recording, write_frame_folder,
+                                   write_multipage_tiff, write_npy)
+
+
+@pytest.fixture(scope="module")
+def stack() -> np.ndarray:
+    """12 frames of 24x32 px with distinct content (each frame carries its index)."""
+    rng = np.random.default_rng(7)
+    frames = rng.integers(0, 256, size=(12, 24, 32), dtype=np.uint8)
+    frames[:, 0, 0] = np.arange(12)
+    return frames
+
+
+def test_recording_error_is_an_abu_error():
+    assert issubclass(RecordingError, AbuError)
+
+
+def test_multipage_tiff_round_trip(tmp_path, stack):
+    path = write_multipage_tiff(tmp_path / "rec.tif", stack)
+    rec = read_recording(path)
+    assert isinstance(rec, Recording)
+    assert rec.frames.dtype == np.uint8 and rec.shape == stack.shape
+    np.testing.assert_array_equal(rec.frames, stack)
+    assert "TIFF" in rec.source and "rec.tif" in rec.source
+    # no temporary file is left beside it
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["rec.tif"]
+
+
+def test_npy_round_trip_is_memory_mapped(tmp_path, stack):
+    path = write_npy(tmp_path / "rec.npy", stack)
+    rec = read_recording(path)
+    assert isinstance(rec.frames, np.memmap)
+    np.testing.assert_array_equal(rec.frames, stack)
+    np.testing.assert_array_equal(read_recording(path, mmap=False).frames, stack)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".bmp", ".tif"])
+def test_folder_round_trip_in_natural_order(tmp_path, stack, suffix):
+    # names frame0 .. frame11 without zero padding: plain sorting would put frame10 after frame1
+    folder = write_frame_folder(tmp_path / "frames", stack, suffix=suffix)
+    rec = read_recording(folder)
+    np.testing.assert_array_equal(rec.frames[:, 0, 0], np.arange(12))
+    np.testing.assert_array_equal(rec.frames, stack)
+    assert rec.frame_names[10] == f"frame10{suffix}"
+
+
+def test_folder_holding_one_stack_reads_the_stack(tmp_path, stack):
+    write_multipage_tiff(tmp_path / "frames.tif", stack)
+    (tmp_path / "meta.json").write_text("{}")
+    np.testing.assert_array_equal(read_recording(tmp_path).frames, stack)
+
+
+def test_video_is_read_as_grayscale(tmp_path):
+    # a smooth pattern survives lossy MJPG coding to within a few grey levels
+    yy, xx = np.mgrid[0:64, 0:80]
+    frames = np.stack([((xx + 3 * k) * 2 % 200 + 20).astype(np.uint8) for k in range(5)])
+    path = tmp_path / "rec.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (80, 64))
+    if not writer.isOpened():
+        pytest.skip("this OpenCV build cannot write MJPG video")
+    for f in frames:
+        writer.write(cv2.cvtColor(f, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    rec = read_recording(path)
+    assert rec.shape == frames.shape and rec.frames.dtype == np.uint8
+    assert np.median(np.abs(rec.frames.astype(int) - frames)) <= 3
+
+
+def test_nonexistent_path(tmp_path):
+    with pytest.raises(RecordingError, match="nope.tif' does not exist"):
+        read_recording(tmp_path / "nope.tif")
+
+
+def test_empty_folder(tmp_path):
+    (tmp_path / "notes.txt").write_text("no frames here")
+    with pytest.raises(RecordingError, match="holds no frames"):
+        read_recording(tmp_path)
+
+
+def test_unreadable_frame_is_named(tmp_path, stack):
+    folder = write_frame_folder(tmp_path / "f", stack[:5])
+    (folder / "frame3.png").write_bytes(b"not a png at all")
+    with pytest.raises(RecordingError, match=r"frame 3 .*frame3\.png.* unreadable"):
+        read_recording(folder)
+
+
+def test_missing_frame_number_is_named(tmp_path, stack):
+    folder = write_frame_folder(tmp_path / "f", stack[:6])
+    (folder / "frame4.png").unlink()
+    with pytest.raises(RecordingError, match=r"frame number 4 is missing .*frame3\.png.*frame5\.png"):
+        read_recording(folder)
+
+
+def test_colour_frame_is_named(tmp_path, stack):
+    folder = write_frame_folder(tmp_path / "f", stack[:4])
+    cv2.imwrite(str(folder / "frame2.png"), np.zeros((24, 32, 3), np.uint8))
+    with pytest.raises(RecordingError, match=r"frame 2 .*frame2\.png.* colour"):
+        read_recording(folder)
+
+
+def test_sixteen_bit_frame_is_named(tmp_path, stack):
+    folder = write_frame_folder(tmp_path / "f", stack[:4])
+    cv2.imwrite(str(folder / "frame1.png"), np.zeros((24, 32), np.uint16))
+    with pytest.raises(RecordingError, match=r"frame 1 .*frame1\.png.* uint16.*uint8"):
+        read_recording(folder)
+
+
+def test_differing_frame_size_is_named(tmp_path, stack):
+    folder = write_frame_folder(tmp_path / "f", stack[:4])
+    cv2.imwrite(str(folder / "frame3.png"), np.zeros((20, 32), np.uint8))
+    with pytest.raises(RecordingError, match=r"frame 3 .*frame3\.png.* 32x20 px"):
+        read_recording(folder)
+
+
+def test_npy_wrong_dtype_and_shape(tmp_path):
+    np.save(tmp_path / "f.npy", np.zeros((3, 8, 8), np.float32))
+    with pytest.raises(RecordingError, match=r"f\.npy.*float32.*uint8"):
+        read_recording(tmp_path / "f.npy")
+    np.save(tmp_path / "c.npy", np.zeros((3, 8, 8, 3), np.uint8))
+    with pytest.raises(RecordingError, match=r"c\.npy.*\(3, 8, 8, 3\).*colour"):
+        read_recording(tmp_path / "c.npy")
+
+
+def test_tiff_wrong_dtype_colour_and_differing_pages(tmp_path):
+    tifffile.imwrite(tmp_path / "d.tif", np.zeros((4, 8, 8), np.uint16), photometric="minisblack")
+    with pytest.raises(RecordingError, match=r"d\.tif.*uint16"):
+        read_recording(tmp_path / "d.tif")
+    tifffile.imwrite(tmp_path / "c.tif", np.zeros((8, 8, 3), np.uint8), photometric="rgb")
+    with pytest.raises(RecordingError, match=r"c\.tif.*colour"):
+        read_recording(tmp_path / "c.tif")
+    with tifffile.TiffWriter(tmp_path / "p.tif") as tw:
+        tw.write(np.zeros((8, 8), np.uint8))
+        tw.write(np.zeros((8, 8), np.uint8))
+        tw.write(np.zeros((6, 8), np.uint8))
+    with pytest.raises(RecordingError, match=r"p\.tif.*frame 2 has shape \(6, 8\)"):
+        read_recording(tmp_path / "p.tif")
+
+
+def test_corrupt_tiff_and_unknown_file(tmp_path):
+    (tmp_path / "x.tif").write_bytes(b"II*\x00garbage")
+    with pytest.raises(RecordingError, match=r"x\.tif"):
+        read_recording(tmp_path / "x.tif")
+    (tmp_path / "x.dat").write_bytes(b"\x00" * 100)
+    with pytest.raises(RecordingError, match=r"cannot read .*x\.dat"):
+        read_recording(tmp_path / "x.dat")
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    with pytest.raises(RecordingError, match="float64"):
+        write_multipage_tiff(tmp_path / "bad.tif", np.zeros((2, 4, 4)))
+    assert list(tmp_path.iterdir()) == []
