@@ -26,7 +26,6 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
-from abu_model.errors import AbuError, ParameterError
 from abu_model.params import DEFAULT_J_ABU, BallParams, PlantParams, check_finite
 from abu_model.plant import AbuPlant, PlantOutputs, PlantState
 
@@ -35,6 +34,12 @@ from abu_model.plant import AbuPlant, PlantOutputs, PlantState
 NO_SWITCH = -1e30
 #: Relative mismatch tolerated between the master's current time and the FMU's time [-].
 TIME_TOLERANCE = 1e-9
+
+#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
+#: references to the slave instance, its log queue and its class twice after a Python exception
+#: (in its exception handler and again in fmi2FreeInstance); spare references make that
+#: harmless, so a master that frees the failed instance does not crash the process.
+_FAILED: list = []
 
 _BALL = ("m", "d", "l", "mu", "mu_d")
 _PARAMETERS = _BALL + ("J_abu", "tau_motor", "ball_reaction", "theta0", "omega0", "beta0",
@@ -224,7 +229,8 @@ class AbuBall(Fmi2Slave):
             message = f"AbuBall '{self.instance_name}': {exc}"
             self.log(message, Fmi2Status.error)
             print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            raise
+            _FAILED.extend((self, self, self.log_queue, type(self)))
+            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
         self._cache = None
         self.step_switches, self.t_first_step_switch = 0, NO_SWITCH
 
@@ -245,10 +251,11 @@ class AbuBall(Fmi2Slave):
         plant.state.time = current_time  # follow the master's clock through rounding
         try:
             switches = plant.advance(step_size, self.torque, self.torque_rate)
-        except (AbuError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
             plant.set_state(saved)  # fmi2Discard: nothing advanced
             self.log(f"AbuBall '{self.instance_name}': step [{current_time!r}, "
-                     f"{current_time + step_size!r}] s failed: {exc}", Fmi2Status.error)
+                     f"{current_time + step_size!r}] s failed: {type(exc).__name__}: {exc}",
+                     Fmi2Status.error)
             return False
         self.step_switches = len(switches)
         self.t_first_step_switch = switches[0].time if switches else NO_SWITCH

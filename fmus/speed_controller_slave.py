@@ -27,6 +27,12 @@ from pythonfmu.enums import Fmi2Status
 from abu_model.errors import ParameterError
 from controller.pi import THETA_REF_MODES, PISpeedController
 
+#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
+#: references to the slave instance, its log queue and its class twice after a Python exception
+#: (in its exception handler and again in fmi2FreeInstance); spare references make that
+#: harmless, so a master that frees the failed instance does not crash the process.
+_FAILED: list = []
+
 _PARAMETERS = ("zeta", "omega_n", "J_abu", "theta_ref_mode", "x_I0")
 _INPUTS = ("omega_ref", "omega", "theta", "alpha")
 
@@ -132,7 +138,8 @@ class SpeedController(Fmi2Slave):
             message = f"SpeedController '{self.instance_name}': {exc}"
             self.log(message, Fmi2Status.error)
             print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            raise
+            _FAILED.extend((self, self, self.log_queue, type(self)))
+            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
         self.x_I = float(self.x_I0)
 
     def do_step(self, current_time, step_size):

@@ -29,6 +29,12 @@ NO_EVENT = 1e30
 #: Relative distance within which a step end is snapped onto a setpoint step time [-].
 EVENT_SNAP = 1e-12
 
+#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
+#: references to the slave instance, its log queue and its class twice after a Python exception
+#: (in its exception handler and again in fmi2FreeInstance); spare references make that
+#: harmless, so a master that frees the failed instance does not crash the process.
+_FAILED: list = []
+
 _PARAMETERS = ("omega0", "omega_end", "t0", "te", "step", "rounding")
 
 
@@ -126,7 +132,8 @@ class Staircase(Fmi2Slave):
             message = f"Staircase '{self.instance_name}': {exc}"
             self.log(message, Fmi2Status.error)
             print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            raise
+            _FAILED.extend((self, self, self.log_queue, type(self)))
+            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
 
     def do_step(self, current_time, step_size):
         end = current_time + step_size

@@ -498,3 +498,49 @@ def test_bad_parameter_fails_initialization_with_a_logged_message(extracted, nam
     errors = [msg for status, msg in slave.messages if status == fmi2Error]
     assert any(f"invalid parameter '{parameter}'" in msg and name in msg for msg in errors), \
         slave.messages
+
+
+FREE_AFTER_FAILURE = textwrap.dedent("""
+    import gc, json, sys
+    from fmpy import extract, read_model_description
+    from fmpy.simulation import instantiate_fmu
+
+    bad = {"AbuBall": ("m", -1.0), "SpeedController": ("omega_n", 0.0), "Staircase": ("te", -1.0)}
+    for name, path in json.loads(sys.argv[1]).items():
+        md = read_model_description(path)
+        unzipdir = extract(path)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        for _ in range(5):
+            fmu = instantiate_fmu(unzipdir, md)
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+            fmu.setReal([vr[bad[name][0]]], [bad[name][1]])
+            try:
+                fmu.exitInitializationMode()
+            except Exception:
+                pass
+            else:
+                raise SystemExit(f"{name}: bad parameter accepted")
+            fmu.terminate()  # not allowed after fmi2Fatal by FMI 2.0, but masters do it
+            fmu.freeInstance()
+            gc.collect()
+        fmu = instantiate_fmu(unzipdir, md)  # a healthy instance still works
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(0.0, 0.1)
+        fmu.terminate()
+        fmu.freeInstance()
+    print("survived")
+""")
+
+
+def test_freeing_an_instance_that_failed_initialization_does_not_crash(fmu_dir, tmp_path):
+    """pythonfmu 0.7 releases the slave twice after an exception; the slaves guard against it."""
+    script = tmp_path / "free.py"
+    script.write_text(FREE_AFTER_FAILURE)
+    paths = {name: str(path) for name, path in fmu_dir.items()}
+    done = subprocess.run([sys.executable, str(script), json.dumps(paths)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
+    assert done.stdout.strip().endswith("survived")
