@@ -223,7 +223,9 @@ def _seeded_moments(frames: np.ndarray, seeds: np.ndarray, window: int, dark: bo
                         else:
                             cx = x0 + mom["m10"] / m00
                             cy = y0 + mom["m01"] / m00
-                            if (cx - qx) ** 2 + (cy - qy) ** 2 > max_jump * max_jump:
+                            # against the last good position, not the prediction: one
+                            # disturbed frame must not make the next good one look like a jump
+                            if (cx - px[m]) ** 2 + (cy - py[m]) ** 2 > max_jump * max_jump:
                                 code = JUMP
                 if code == OK:
                     xs[k, m] = cx
@@ -233,8 +235,8 @@ def _seeded_moments(frames: np.ndarray, seeds: np.ndarray, window: int, dark: bo
                     px[m] = cx
                     py[m] = cy
                 else:
-                    xs[k, m] = qx - vx[m]
-                    ys[k, m] = qy - vy[m]
+                    xs[k, m] = px[m]
+                    ys[k, m] = py[m]
                     vx[m] = 0.0
                     vy[m] = 0.0
                     reason[k, m] = code
@@ -477,7 +479,48 @@ def _refine_report(G: np.ndarray, geo: _WindowGeometry, opts: TrackingOptions
     return a, b, r, reason
 
 
-_REFINERS = {"isocontour": _refine_isocontour, "report": _refine_report}
+def _refine_moments(G: np.ndarray, geo: _WindowGeometry, opts: TrackingOptions
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The moments method, vectorised, with the lost-marker tests.
+
+    Centroid of (I - L)+ with L the midpoint of the window's min and max (as ``cv2.moments`` in
+    the seeded pass), plus: contrast over the border noise (after a plane fit), the thresholded
+    blob touching the window edge, and compactness -- the blob's second moment must match a
+    single disk of its area (two blobs in the window, e.g. a reflection, fail this).
+    """
+    K, w, _ = G.shape
+    flat = G.reshape(K, w * w)
+    lo = flat.min(axis=1)
+    hi = flat.max(axis=1)
+    W = G - (0.5 * (lo + hi))[:, None, None]
+    np.maximum(W, 0.0, out=W)
+    m00 = W.sum(axis=(1, 2))
+    ar = np.arange(w, dtype=np.float32)
+    wx = W.sum(axis=1)                      # (K, w) column sums
+    wy = W.sum(axis=2)                      # (K, w) row sums
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = (wx @ ar) / m00
+        b = (wy @ ar) / m00
+        var = ((wx @ (ar * ar)) + (wy @ (ar * ar))) / m00 - a * a - b * b  # mu20 + mu02 [px^2]
+        area = (W > 0).sum(axis=(1, 2)).astype(float)
+        compact = var * 2.0 * np.pi / area  # 1 for a uniform disk (var = r^2/2, area = pi r^2)
+        radius = np.sqrt(area / np.pi)
+    ring = flat[:, geo.ring]
+    coef = np.einsum("kp,cp->kc", ring, geo.plane_pinv)
+    noise = (ring - np.einsum("kc,cp->kp", coef, geo.plane_basis[:, geo.ring])).std(axis=1)
+    peak = (flat - np.einsum("kc,cp->kp", coef, geo.plane_basis)).max(axis=1)
+    reason = np.zeros(K, dtype=np.uint8)
+    reason[~np.isfinite(a) | (compact > 1.6)] = FIT_FAILED
+    above = W > 0
+    touches = (above[:, 0, :].any(axis=1) | above[:, -1, :].any(axis=1)
+               | above[:, :, 0].any(axis=1) | above[:, :, -1].any(axis=1))
+    reason[touches] = TOUCHES_EDGE
+    reason[(peak < opts.min_contrast) | (peak < opts.min_snr * noise)] = LOW_CONTRAST
+    return a, b, radius, reason
+
+
+_REFINERS = {"isocontour": _refine_isocontour, "report": _refine_report,
+             "moments": _refine_moments}
 
 
 def _refine(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, reason0: np.ndarray,
@@ -574,12 +617,8 @@ def track_recording(frames: np.ndarray, seeds: np.ndarray, *, method: str = DEFA
     frames, seeds, window = _check_inputs(frames, seeds, window, method)
     opts = options or TrackingOptions()
     xs, ys, reason = _seeded_moments(frames, seeds, window, dark, opts, progress)
-    if method == "moments":
-        X, Y = xs, ys
-        R = np.full(xs.shape, np.nan)  # the moments method measures no radius
-    else:
-        X, Y, R, reason = _refine(frames, xs, ys, reason, window, dark, method, opts)
-    _post_checks(X, Y, R, reason, window, opts, check_radius=method != "moments")
+    X, Y, R, reason = _refine(frames, xs, ys, reason, window, dark, method, opts)
+    _post_checks(X, Y, R, reason, window, opts, check_radius=True)
     lost = reason != OK
     X = np.where(lost, np.nan, X)
     Y = np.where(lost, np.nan, Y)
@@ -594,8 +633,7 @@ def measure_windows(windows: np.ndarray, *, method: str = DEFAULT_METHOD, dark: 
     """Centre of the marker in each of a batch of windows (K, w, w) uint8 (no seeding).
 
     Returns x, y [px, window coordinates], radius [px] and reason codes (0 = found).
-    Useful for tests and for measuring single images; ``moments`` is computed as in the
-    seeded pass.
+    Useful for tests and for measuring single images.
     """
     if method not in METHODS:
         raise ParameterError("method", method, f"one of {', '.join(METHODS)}")
@@ -604,22 +642,6 @@ def measure_windows(windows: np.ndarray, *, method: str = DEFAULT_METHOD, dark: 
     if win.ndim != 3 or win.shape[1] != win.shape[2] or win.dtype != np.uint8:
         raise TrackingError(f"windows: expected (K, w, w) uint8, got {win.shape} {win.dtype}")
     K, w, _ = win.shape
-    if method == "moments":
-        import cv2
-
-        x = np.full(K, np.nan)
-        y = np.full(K, np.nan)
-        code = np.zeros(K, dtype=np.uint8)
-        for k in range(K):
-            img = 255 - win[k] if dark else win[k]
-            lo, hi, _, _ = cv2.minMaxLoc(img)
-            mom = cv2.moments(cv2.subtract(img, (lo + hi) * 0.5))
-            if hi - lo < opts.min_contrast or mom["m00"] <= 0:
-                code[k] = LOW_CONTRAST
-                continue
-            x[k] = mom["m10"] / mom["m00"]
-            y[k] = mom["m01"] / mom["m00"]
-        return x, y, np.full(K, np.nan), code
     G = win.astype(np.float32)
     if dark:
         G = 255.0 - G
