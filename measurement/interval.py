@@ -1,0 +1,363 @@
+"""The interval [mu_low, mu_high] on the static friction coefficient from one record.
+
+The report's t1/t2/t3 argument (sec. 5.3) made general. Along a stick trajectory the friction the
+ball needs is (eq. 5.3, SI units)
+
+    mu_req(t) = (l - d/5) |omega_dot| / (l omega^2).
+
+The ball sticks while mu_req <= mu. Let M(t) be the running maximum of mu_req over the trusted
+region (where the kinematics estimator is reliable). If the ball is surely stuck up to t_a, then
+mu >= M(t_a); if it surely slips at t_b, the slip started at some t_s <= t_b with mu < mu_req(t_s)
+<= M(t_b). So mu is in [M(t_a), M(t_b)].
+
+Error bars, conservatively. mu_req is computed twice more with the noise error bars of omega and
+omega_dot pushed k_sigma standard deviations in the unfavourable direction:
+mu_req_lo = (l - d/5) max(|omega_dot| - k s_a, 0) / (l (|omega| + k s_w)^2) and
+mu_req_hi = (l - d/5) (|omega_dot| + k s_a) / (l (|omega| - k s_w)^2). The lower bound uses
+M_lo (running max of mu_req_lo), the upper bound M_hi.
+
+Slip detection on beta (harmonic already removed). d(t) = direction * (beta(t) - b0), with b0 the
+median over the first ``reference_s`` of the record (the ball sticks there: the staircase is
+designed so) and direction = -sign(omega_dot) (the ball slips backwards against the acceleration).
+d is smoothed by a moving average over ``smooth_s``; its noise sigma_d is the larger of the white
+noise estimate (sigma_beta / sqrt(window)) and the spread of the smoothed fit residual (catches
+coloured leftovers such as an imperfectly removed harmonic), combined with the uncertainty of b0.
+
+* t_b, the first *surely slipping* time: the first sample from which the smoothed deviation stays
+  above k_sigma sigma_d until the end of the record (and for at least ``hold_s``). beta of a ball
+  that slips one way never comes back, noise does.
+* t_a, the last *surely stuck* time. Method ``creep`` (default): a slip is only visible once the
+  ball has moved by a few sigma_d, so the time beta leaves the noise band lags the slip start; the
+  lag is long exactly when the slip is marginal. We therefore test hypotheses on mu: for a
+  candidate mu, integrate the ball's slip equation (DESIGN sec. 2, with the measured omega and
+  omega_dot shrunk by their error bars, and dynamic friction mu_d = mu, which gives the *least*
+  motion any mu_d <= mu can give) to predict the displacement the ball would have made; reject the
+  candidate if the smoothed data stay significantly below that prediction somewhere (threshold
+  k_c sigma_d, with k_c raised for the number of independent windows so that a stuck record
+  falsely rejects with probability ``false_alarm``). mu_creep = the smallest candidate not
+  rejected; t_a = the last time with M_lo(t) <= mu_creep, and mu_low = M_lo(t_a) <= mu_creep.
+  Method ``band`` (the report's reading): t_a = the last time before t_b at which the smoothed
+  deviation was at or below the stick level; no lag correction, so it can overstate mu_low when the
+  slip starts at an acceleration step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.stats import norm
+
+from abu_model.errors import ParameterError
+
+from .harmonic import robust_std
+from .kinematics import noise_sigma
+
+LOWER_METHODS = ("creep", "band")
+
+
+@dataclass(frozen=True)
+class IntervalOptions:
+    """Settings of :func:`slip_interval`.
+
+    Attributes:
+        k_sigma: multiple of the 1-sigma error bars used for the mu_req bands and the slip
+            threshold [-].
+        smooth_s: moving-average window on beta for the slip detection [s].
+        reference_s: initial stretch whose median is the stick value b0 [s].
+        hold_s: shortest stretch above the threshold before the record ends that counts as a
+            slip [s].
+        lower: ``creep`` (default) or ``band``: how t_a is found.
+        false_alarm: probability that the creep test rejects a true mu by noise [-].
+        mu_grid: number of candidate mu values per refinement level of the creep test.
+    """
+
+    k_sigma: float = 3.0
+    smooth_s: float = 0.005
+    reference_s: float = 0.02
+    hold_s: float = 0.01
+    lower: str = "creep"
+    false_alarm: float = 0.01
+    mu_grid: int = 48
+
+    def __post_init__(self) -> None:
+        for name in ("k_sigma", "smooth_s", "reference_s", "hold_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ParameterError(name, value, "a finite number > 0")
+        if self.lower not in LOWER_METHODS:
+            raise ParameterError("lower", self.lower, f"one of {', '.join(LOWER_METHODS)}")
+        if not 0.0 < self.false_alarm < 1.0:
+            raise ParameterError("false_alarm", self.false_alarm, "a probability in (0, 1)")
+        if int(self.mu_grid) < 4:
+            raise ParameterError("mu_grid", self.mu_grid, "an integer >= 4")
+
+
+@dataclass(frozen=True)
+class SlipInterval:
+    """The interval and everything needed to plot and explain it.
+
+    Scalars in SI units (s, rad); ``None`` where a bound does not exist (see ``status``).
+    Arrays are on the sample times; mu_req arrays are NaN outside the trusted region.
+    """
+
+    mu_low: float | None
+    mu_high: float | None
+    t_a: float | None
+    t_b: float | None
+    mu_creep: float | None
+    status: str
+    mu_req: np.ndarray
+    mu_req_lo: np.ndarray
+    mu_req_hi: np.ndarray
+    running_max: np.ndarray
+    running_max_lo: np.ndarray
+    running_max_hi: np.ndarray
+    deviation: np.ndarray
+    sigma_deviation: float
+    threshold: float
+    direction: int
+    beta_stick: float
+    details: dict = field(default_factory=dict)
+
+
+def mu_required(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float) -> np.ndarray:
+    """mu_req = (l - d/5) |omega_dot| / (l omega^2) [-] (eq. 5.3); omega in rad/s, l, d in m."""
+    omega = np.asarray(omega, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (l - d / 5.0) * np.abs(omega_dot) / (l * omega ** 2)
+
+
+def mu_required_bands(omega: np.ndarray, omega_dot: np.ndarray, sigma_omega: np.ndarray,
+                      sigma_omega_dot: np.ndarray, l: float, d: float,
+                      k: float) -> tuple[np.ndarray, np.ndarray]:
+    """(mu_req_lo, mu_req_hi): mu_req with the error bars pushed k sigma down and up."""
+    w = np.abs(np.asarray(omega, dtype=float))
+    a = np.abs(np.asarray(omega_dot, dtype=float))
+    a_lo = np.maximum(a - k * sigma_omega_dot, 0.0)
+    a_hi = a + k * sigma_omega_dot
+    w_hi = w + k * sigma_omega
+    w_lo = np.maximum(w - k * sigma_omega, 1e-12)
+    ratio = (l - d / 5.0) / l
+    return ratio * a_lo / w_hi ** 2, ratio * a_hi / w_lo ** 2
+
+
+def running_max(values: np.ndarray, trusted: np.ndarray) -> np.ndarray:
+    """Running maximum of ``values`` over the trusted samples (NaN before the first one).
+
+    The trusted region must be one contiguous run; after it the last maximum is carried on.
+    """
+    v = np.asarray(values, dtype=float)
+    out = np.full(v.shape, np.nan)
+    idx = np.flatnonzero(trusted)
+    if idx.size == 0:
+        return out
+    i0, i1 = idx[0], idx[-1]
+    out[i0: i1 + 1] = np.maximum.accumulate(v[i0: i1 + 1])
+    out[i1 + 1:] = out[i1]
+    return out
+
+
+def predicted_creep(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
+                    mu: np.ndarray, l: float, d: float, direction: int, start: int,
+                    stop: int) -> np.ndarray:
+    """Displacement [rad] the ball would make along ``direction`` for each candidate mu.
+
+    The ball starts stuck at sample ``start``; omega, omega_dot are taken as the true motion of
+    the ABU; dynamic friction equals mu. Stick while (l - d/5) a <= mu l omega^2 with
+    a = -direction * omega_dot the acceleration pushing the ball along ``direction``; in slip,
+    with u >= 0 the slip speed, 1.4 l u' = (l - d/5) a - mu F_N/m and
+    F_N/m = l (omega + s u)^2 + 0.4 l u^2 - 0.2 d omega s u (s = direction, DESIGN sec. 2);
+    re-stick when u returns to 0. Integrated sample by sample (the input held constant over a
+    sample interval, exact for constant u').
+
+    Returns:
+        (len(mu), len(time)) array, zero before ``start`` and held after ``stop``.
+    """
+    t = np.asarray(time, dtype=float)
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    out = np.zeros((mu.size, t.size))
+    u = np.zeros(mu.size)
+    disp = np.zeros(mu.size)
+    slipping = np.zeros(mu.size, dtype=bool)
+    lever = l - d / 5.0
+    s = float(direction)
+    for i in range(start, stop):
+        h = t[i + 1] - t[i]
+        w = float(omega[i])
+        push = lever * (-s * float(omega_dot[i]))
+        normal = l * (w + s * u) ** 2 + 0.4 * l * u ** 2 - 0.2 * d * w * s * u
+        slipping = slipping | (push > mu * l * w * w)
+        acc = np.where(slipping, (push - mu * normal) / (1.4 * l), 0.0)
+        u_new = u + acc * h
+        stop_now = slipping & (u_new <= 0.0)
+        # Exact for constant acceleration; where the ball re-sticks, integrate up to u = 0.
+        step = np.where(stop_now, np.where(acc < 0, -u * u / (2.0 * np.where(acc < 0, acc, -1.0)),
+                                           0.0), 0.5 * (u + u_new) * h)
+        disp = disp + np.where(slipping, step, 0.0)
+        u = np.where(stop_now, 0.0, np.where(slipping, u_new, 0.0))
+        slipping = slipping & ~stop_now
+        out[:, i + 1] = disp
+    out[:, stop + 1:] = disp[:, None]
+    return out
+
+
+def _first_sure_slip(dev: np.ndarray, threshold: float, first: int, hold: int) -> int | None:
+    """First index from which dev > threshold up to the end (at least ``hold`` samples)."""
+    above = dev > threshold
+    if not above[-1]:
+        return None
+    below = np.flatnonzero(~above)
+    j = int(below[-1]) + 1 if below.size else 0
+    j = max(j, first)
+    if dev.size - j < hold:
+        return None
+    return j
+
+
+def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
+                  sigma_omega: np.ndarray, sigma_omega_dot: np.ndarray, trusted: np.ndarray,
+                  beta_clean: np.ndarray, beta_residual: np.ndarray, *, l: float, d: float,
+                  options: IntervalOptions = IntervalOptions(),
+                  direction: int | None = None) -> SlipInterval:
+    """[mu_low, mu_high] from the kinematics and the harmonic-free beta (module docstring).
+
+    Args:
+        time: uniform sample times [s].
+        omega, omega_dot, sigma_omega, sigma_omega_dot: kinematics and 1-sigma error bars
+            [rad/s, rad/s^2].
+        trusted: (N,) bool, one contiguous run where the kinematics are reliable.
+        beta_clean: measured beta minus the fitted harmonic [rad].
+        beta_residual: residual of the beta fit [rad] (its smoothed spread enters sigma_d).
+        l, d: ball path radius and diameter [m].
+        options: :class:`IntervalOptions`.
+        direction: +1 / -1 the direction beta moves in slip; default -sign(median omega_dot).
+    """
+    t = np.asarray(time, dtype=float)
+    n = t.size
+    trusted = np.asarray(trusted, dtype=bool)
+    idx = np.flatnonzero(trusted)
+    if idx.size < 3:
+        raise ParameterError("trusted", f"{idx.size} samples", "a trusted region of >= 3 samples")
+    i0, i1 = int(idx[0]), int(idx[-1])
+    if idx.size != i1 - i0 + 1:
+        raise ParameterError("trusted", "several runs", "one contiguous trusted region")
+    dt = float(np.median(np.diff(t)))
+    k = float(options.k_sigma)
+
+    mu_req = mu_required(omega, omega_dot, l, d)
+    mu_lo, mu_hi = mu_required_bands(omega, omega_dot, sigma_omega, sigma_omega_dot, l, d, k)
+    for arr in (mu_req, mu_lo, mu_hi):
+        arr[~trusted] = np.nan
+    m_req = running_max(mu_req, trusted)
+    m_lo = running_max(mu_lo, trusted)
+    m_hi = running_max(mu_hi, trusted)
+
+    if direction is None:
+        med = float(np.median(np.asarray(omega_dot)[trusted]))
+        direction = -1 if med > 0 else 1
+    direction = int(direction)
+
+    # Deviation from the stick value, smoothed, and its noise.
+    beta_clean = np.asarray(beta_clean, dtype=float)
+    n_ref = max(3, int(round(options.reference_s / dt)))
+    window = max(1, int(round(options.smooth_s / dt)))
+    b0 = float(np.median(beta_clean[:n_ref]))
+    dev = direction * (beta_clean - b0)
+    dev_s = uniform_filter1d(dev, window, mode="nearest")
+    sigma_raw = noise_sigma(beta_clean)
+    sigma_white = sigma_raw / math.sqrt(window)
+    sigma_coloured = robust_std(uniform_filter1d(np.asarray(beta_residual, float), window,
+                                                 mode="nearest"))
+    sigma_ref = 1.2533 * sigma_raw / math.sqrt(n_ref)  # std of a median of n_ref samples
+    sigma_dev = math.sqrt(max(sigma_white, sigma_coloured) ** 2 + sigma_ref ** 2)
+    threshold = k * sigma_dev
+    hold = max(1, int(round(options.hold_s / dt)))
+
+    tb_i = _first_sure_slip(dev_s, threshold, n_ref, hold)
+    details: dict = {"sigma_beta_rad": sigma_raw, "smooth_window_samples": window,
+                     "reference_samples": n_ref, "trusted_start_s": float(t[i0]),
+                     "trusted_end_s": float(t[i1])}
+    status = "ok"
+    mu_high: float | None = None
+    t_b: float | None = None
+    if tb_i is None:
+        status = "no slip detected: only a lower bound"
+    elif tb_i < i0:
+        status = "slip detected before the trusted region: no bound"
+    elif tb_i > i1:
+        status = "slip detected after the trusted region: only a lower bound"
+    else:
+        t_b = float(t[tb_i])
+        mu_high = float(m_hi[tb_i])
+
+    # Lower bound.
+    mu_creep: float | None = None
+    ta_i: int | None = None
+    end = i1 if tb_i is None or tb_i > i1 else tb_i
+    if status.startswith("slip detected before"):
+        ta_i = None
+    elif options.lower == "band":
+        if tb_i is None:
+            ta_i = i1
+        else:
+            at_level = np.flatnonzero(dev_s[: tb_i] <= 0.0)
+            ta_i = int(at_level[-1]) if at_level.size else None
+            if ta_i is not None and ta_i < i0:
+                ta_i = None
+    else:
+        mu_creep, k_c = _creep_lower_bound(t, omega, omega_dot, sigma_omega, sigma_omega_dot,
+                                           mu_lo, m_lo, dev_s, sigma_dev, l, d, direction,
+                                           i0, i1, window, options)
+        details["creep_threshold_sigma"] = k_c
+        below = np.flatnonzero(m_lo[i0: end + 1] <= mu_creep) if mu_creep is not None else []
+        ta_i = i0 + int(below[-1]) if len(below) else None
+    t_a = float(t[ta_i]) if ta_i is not None else None
+    mu_low = float(m_lo[ta_i]) if ta_i is not None else None
+    if mu_low is None and not status.startswith("slip detected before"):
+        status = "ball not surely stuck at the start of the trusted region: no lower bound"
+
+    return SlipInterval(
+        mu_low=mu_low, mu_high=mu_high, t_a=t_a, t_b=t_b, mu_creep=mu_creep, status=status,
+        mu_req=mu_req, mu_req_lo=mu_lo, mu_req_hi=mu_hi, running_max=m_req, running_max_lo=m_lo,
+        running_max_hi=m_hi, deviation=dev_s, sigma_deviation=sigma_dev, threshold=threshold,
+        direction=direction, beta_stick=b0, details=details)
+
+
+def _creep_lower_bound(t, omega, omega_dot, sigma_omega, sigma_omega_dot, mu_lo, m_lo, dev_s,
+                       sigma_dev, l, d, direction, i0, i1, window,
+                       options: IntervalOptions) -> tuple[float | None, float]:
+    """Smallest candidate mu whose predicted (least) creep the data do not contradict."""
+    k = options.k_sigma
+    # Least motion: acceleration shrunk, speed (normal force) enlarged by their error bars.
+    a_mag = np.maximum(np.abs(omega_dot) - k * sigma_omega_dot, 0.0)
+    omega_c = np.sign(omega) * (np.abs(omega) + k * sigma_omega)
+    omega_dot_c = np.sign(omega_dot) * a_mag
+    n_blocks = max(1.0, (i1 - i0 + 1) / window)
+    k_c = max(k, float(norm.isf(options.false_alarm / n_blocks)))
+    limit = k_c * sigma_dev
+
+    def rejected(candidates: np.ndarray) -> np.ndarray:
+        creep = predicted_creep(t, omega_c, omega_dot_c, candidates, l, d, direction, i0, i1)
+        creep_s = uniform_filter1d(creep, window, axis=1, mode="nearest")
+        gap = np.where(creep_s[:, i0: i1 + 1] > 0.0,
+                       creep_s[:, i0: i1 + 1] - dev_s[None, i0: i1 + 1], -np.inf)
+        return gap.max(axis=1) > limit
+
+    lo = float(np.nanmin(mu_lo[i0: i1 + 1]))
+    hi = float(np.nanmax(m_lo[i0: i1 + 1]))
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= 0:
+        return None, k_c
+    lo = max(lo, hi * 1e-3)
+    # A candidate at or above max mu_req_lo predicts no slip at all: never rejected.
+    for _level in range(2):
+        grid = np.geomspace(lo, hi, options.mu_grid)
+        rej = rejected(grid)
+        if not rej.any():
+            return float(grid[0]), k_c
+        last = int(np.flatnonzero(rej)[-1])
+        if last == grid.size - 1:
+            return hi, k_c
+        lo, hi = float(grid[last]), float(grid[last + 1])
+    return hi, k_c
