@@ -78,7 +78,13 @@ def _package_dir(package: str) -> Path:
         raise FmuBuildError(f"'{package}' is not a package of this project: "
                             f"expected one of {', '.join(PROJECT_PACKAGES)}")
     module = importlib.import_module(package)
-    return Path(module.__file__).resolve().parent
+    # __path__, not __file__: an editable install made before a package had its __init__.py
+    # maps it as a namespace package (no __file__) outside the source tree.
+    for entry in getattr(module, "__path__", []):
+        if (Path(entry) / "__init__.py").is_file():
+            return Path(entry).resolve()
+    raise FmuBuildError(f"package '{package}' has no folder with an __init__.py "
+                        f"(found {list(getattr(module, '__path__', []))})")
 
 
 def _absolute_project_imports(tree: ast.AST) -> list[tuple[ast.stmt, str]]:
@@ -151,6 +157,16 @@ def _forget_modules(names: list[str]) -> None:
             del sys.modules[key]
 
 
+def _real_start_values(cls, resources: Path) -> dict[str, float]:
+    """Start values of the Real parameters and inputs of a fresh slave instance."""
+    from pythonfmu import Fmi2Causality, Real
+
+    instance = cls(instance_name="build", resources=str(resources))
+    return {v.name: float(v.getter()) for v in instance.vars.values()
+            if isinstance(v, Real) and v.causality in (Fmi2Causality.parameter,
+                                                       Fmi2Causality.input)}
+
+
 def build_slave_fmu(script: Path, module: str, vendored: Mapping[Path, str], target: Path,
                     class_name: str | None = None) -> Path:
     """Build one FMU from a slave script with pythonfmu and fix its model description.
@@ -190,11 +206,11 @@ def build_slave_fmu(script: Path, module: str, vendored: Mapping[Path, str], tar
                 raise FmuBuildError(f"{script}: slave class is '{cls.__name__}', "
                                     f"expected '{class_name}'")
             try:
-                spec = InterfaceSpec(units=dict(cls.UNITS),
-                                     output_dependencies=dict(cls.OUTPUT_DEPENDENCIES))
+                units, deps = dict(cls.UNITS), dict(cls.OUTPUT_DEPENDENCIES)
             except AttributeError as exc:
                 raise FmuBuildError(f"{script}: the slave class must define UNITS and "
                                     f"OUTPUT_DEPENDENCIES ({exc})") from None
+            spec = InterfaceSpec(units, deps, _real_start_values(cls, stage))
             return rewrite_fmu_model_description(raw, target, spec)
         finally:
             _forget_modules(forget)

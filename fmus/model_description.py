@@ -66,10 +66,13 @@ class InterfaceSpec:
             :data:`UNIT_DEFINITIONS`.
         output_dependencies: for every output, the names of the inputs it depends on
             directly (feedthrough) during a simulation step; ``()`` for none.
+        real_starts: exact start values of Real variables; written with ``repr`` so they
+            round-trip (pythonfmu writes 16 significant digits, one short of a double's 17).
     """
 
     units: Mapping[str, str] = field(default_factory=dict)
     output_dependencies: Mapping[str, Sequence[str]] = field(default_factory=dict)
+    real_starts: Mapping[str, float] = field(default_factory=dict)
 
 
 def _variable_type(sv: ET.Element) -> str:
@@ -115,7 +118,10 @@ def fix_model_description(xml: bytes, spec: InterfaceSpec) -> bytes:
             unit = spec.units.get(name)
             if unit is None:
                 raise FmuBuildError(f"Real variable '{name}' has no unit in the interface spec")
-            sv.find("Real").set("unit", unit)
+            real = sv.find("Real")
+            real.set("unit", unit)
+            if real.get("start") is not None and name in spec.real_starts:
+                real.set("start", repr(float(spec.real_starts[name])))
             if unit not in used_units:
                 used_units.append(unit)
         elif name in spec.units:
@@ -222,3 +228,29 @@ def rewrite_fmu_model_description(source: str | os.PathLike, target: str | os.Pa
                 pass
             raise
     return target
+
+
+def variable_table_markdown(xml: bytes) -> str:
+    """A Markdown table of the variables in a (fixed) modelDescription.xml.
+
+    Columns: name, causality, type, unit, start value, value reference, direct dependencies
+    (outputs only) and description. docs/fmus.md holds these tables for the three FMUs.
+    """
+    root = ET.fromstring(xml)
+    variables = list(root.find("ModelVariables").findall("ScalarVariable"))
+    by_index = {i + 1: sv.get("name") for i, sv in enumerate(variables)}
+    deps: dict[str, str] = {}
+    outputs = root.find("ModelStructure/Outputs")
+    for unknown in [] if outputs is None else outputs.findall("Unknown"):
+        names = [by_index[int(i)] for i in (unknown.get("dependencies") or "").split()]
+        deps[by_index[int(unknown.get("index"))]] = ", ".join(names) if names else "-"
+    rows = ["| name | causality | type | unit | start | vr | depends on | description |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for sv in variables:
+        type_el = next(child for child in sv if child.tag in _TYPE_TAGS)
+        name = sv.get("name")
+        rows.append("| " + " | ".join([
+            f"`{name}`", sv.get("causality", "local"), type_el.tag, type_el.get("unit", ""),
+            type_el.get("start", ""), sv.get("valueReference"), deps.get(name, ""),
+            (sv.get("description") or "").replace("|", "\\|")]) + " |")
+    return "\n".join(rows) + "\n"

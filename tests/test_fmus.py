@@ -544,3 +544,22 @@ def test_freeing_an_instance_that_failed_initialization_does_not_crash(fmu_dir, 
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
     assert done.stdout.strip().endswith("survived")
+
+
+def test_start_values_round_trip_exactly(fmu_dir):
+    md = read_model_description(str(fmu_dir["Staircase"]))
+    starts = {v.name: v.start for v in md.modelVariables}
+    assert float(starts["omega0"]) == -2 * math.pi * 17 and float(starts["step"]) == 2 * math.pi
+    md = read_model_description(str(fmu_dir["AbuBall"]))
+    assert float({v.name: v.start for v in md.modelVariables}["omega0"]) == W17
+
+
+@pytest.mark.parametrize("name", ["AbuBall", "SpeedController", "Staircase"])
+def test_docs_variable_tables_match_the_built_fmus(fmu_dir, name):
+    from fmus.model_description import variable_table_markdown
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "fmus.md").read_text(encoding="utf-8")
+    start = doc.index(f"<!-- table:{name} -->\n") + len(f"<!-- table:{name} -->\n")
+    table = doc[start:doc.index("<!-- end table -->", start)]
+    with zipfile.ZipFile(fmu_dir[name]) as z:
+        assert table == variable_table_markdown(z.read("modelDescription.xml"))
