@@ -64,6 +64,7 @@ NEXT_EVENT_OUTPUT = "next_event_time"
 SWITCH_COUNT_OUTPUT = "switch_count"
 SWITCH_TIME_OUTPUT = "t_last_switch"
 SWITCH_STATE_OUTPUT = "mode"
+FIRST_SWITCH_OUTPUT = "t_first_step_switch"
 
 _STATUS = ["ok", "warning", "discard", "error", "fatal", "pending"]
 _ERROR, _FATAL = 3, 4
@@ -468,7 +469,9 @@ class CoSimulation:
                 time_var = inst.variables[SWITCH_TIME_OUTPUT]
                 mode_var = (inst.variables[SWITCH_STATE_OUTPUT]
                             if inst.has_output(SWITCH_STATE_OUTPUT) else None)
-                self._switch_plan.append((inst, count_var, time_var, mode_var))
+                first_var = (inst.variables[FIRST_SWITCH_OUTPUT]
+                             if inst.has_output(FIRST_SWITCH_OUTPUT) else None)
+                self._switch_plan.append((inst, count_var, time_var, mode_var, first_var))
         if self._switch_plan:
             missing = [i.name for i in self._instances.values() if not i.can_get_state]
             if missing:
@@ -531,14 +534,17 @@ class CoSimulation:
                 owners.add(inst.name)
         return earliest, frozenset(owners)
 
-    def _switch_info(self) -> list[tuple[int, float, float | None]]:
+    def _switch_info(self) -> list[tuple[int, float, float | None, float | None]]:
+        """(switch_count, t_last_switch, mode, t_first_step_switch) of each switching FMU."""
         info = []
-        for inst, count_var, time_var, mode_var in self._switch_plan:
+        for inst, count_var, time_var, mode_var, first_var in self._switch_plan:
             count = self._get(inst, count_var.type, [count_var.valueReference])[0]
-            t_sw = self._get(inst, time_var.type, [time_var.valueReference])[0]
+            reals = [time_var] + ([first_var] if first_var is not None else [])
+            times = self._get(inst, "Real", [v.valueReference for v in reals])
             mode = (self._get(inst, mode_var.type, [mode_var.valueReference])[0]
                     if mode_var is not None else None)
-            info.append((int(count), float(t_sw), mode))
+            info.append((int(count), float(times[0]), mode,
+                         float(times[1]) if first_var is not None else None))
         return info
 
     # ------------------------------------------------------------------ run
@@ -657,13 +663,7 @@ class CoSimulation:
             while True:
                 self._do_step(t, h, stats)
                 after = self._switch_info()
-                inner: list[float] = []
-                crowded = False
-                for (c0, _, _), (c1, t_sw, _) in zip(before, after):
-                    if c1 - c0 > 1:
-                        crowded = True
-                    elif c1 - c0 == 1 and t + self.switch_tol < t_sw < t + h - self.switch_tol:
-                        inner.append(t_sw)
+                inner, crowded = self._inner_switches(t, h, before, after)
                 if not inner and not crowded:
                     break
                 if tries >= self.max_rollbacks:
@@ -675,9 +675,8 @@ class CoSimulation:
                         inst.slave.setFMUstate(state)
                 stats["rollbacks"] += 1
                 tries += 1
-                h = min(inner) - t if inner else h / 2.0
-                if crowded and inner:
-                    h = min(h, (min(inner) - t))
+                # Land on the first inner switch; halve when an FMU cannot say where it is.
+                h = min([ts - t for ts in inner] + ([h / 2.0] if crowded else []))
         finally:
             for inst, state in states:
                 try:
@@ -686,15 +685,50 @@ class CoSimulation:
                     pass
         t_new = t + h
         events = []
-        for (inst, _, _, _), (c0, _, m0), (c1, t_sw, m1) in zip(self._switch_plan, before, after):
-            if c1 > c0:
-                located = (abs(t_sw - t_new) <= self.switch_tol or abs(t_sw - t) <= self.switch_tol)
+        for (inst, *_), (c0, _, m0, _), (c1, t_last, m1, t_first) in zip(
+                self._switch_plan, before, after):
+            if c1 <= c0:
+                continue
+            # (time, count, mode before, mode after); intermediate modes are unknown.
+            found = [(t_last, c1, m0 if c1 - c0 == 1 else None, m1)]
+            if c1 - c0 >= 2 and t_first is not None:
+                found.insert(0, (t_first, c0 + 1, m0, None))
+            for t_sw, count, mode_before, mode_after in found:
+                located = min(abs(t_sw - t_new), abs(t_sw - t)) <= self.switch_tol
                 if not located:
                     notes.append(f"switch of '{inst.name}' at t = {t_sw:.12g} s accepted at the "
                                  f"nearest communication point {t_new:.12g} s")
-                events.append(SwitchEvent(time=t_sw, component=inst.name, count=c1,
-                                          before=m0, after=m1, located=located))
+                events.append(SwitchEvent(time=t_sw, component=inst.name, count=count,
+                                          before=mode_before, after=mode_after, located=located))
         return t_new, events, after
+
+    def _inner_switches(self, t: float, h: float, before: list,
+                        after: list) -> tuple[list[float], bool]:
+        """Switch times strictly inside (t, t + h) to land on, and whether some FMU had
+        several switches in the step without saying where the first inner one is."""
+        tol = self.switch_tol
+
+        def inside(ts: float) -> bool:
+            return t + tol < ts < t + h - tol
+
+        inner: list[float] = []
+        crowded = False
+        for (c0, _, _, _), (c1, t_last, _, t_first) in zip(before, after):
+            n = c1 - c0
+            if n == 1:
+                if inside(t_last):
+                    inner.append(t_last)
+            elif n > 1:
+                if t_first is None:
+                    crowded = True  # only the last switch is known
+                elif inside(t_first):
+                    inner.append(t_first)
+                elif abs(t_first - t) <= tol and n == 2:
+                    if inside(t_last):  # one at the start, the other inside
+                        inner.append(t_last)
+                elif t_first < t + h - tol:
+                    crowded = True  # the first at the start, more than one after it
+        return inner, crowded
 
 
 _EXTRACT_ROOT: tempfile.TemporaryDirectory | None = None

@@ -1,0 +1,423 @@
+"""The report's simulated experiments as FMI co-simulations (report ch. 4).
+
+* :class:`StaircaseExperiment` / :func:`run_staircase` (sec. 4.2): Staircase -> SpeedController
+  -> AbuBall in closed loop; the friction bounds mu_low <= mu < mu_high from the run.
+* :class:`RampExperiment` / :func:`run_ramp` (sec. 4.1): AbuBall alone, driven by a torque
+  that makes the rotor's acceleration grow linearly; the slip point and eq. 4.1/4.2.
+
+Everything is SI (rad, rad/s, s, kg, m); the command line converts Hz at its boundary.
+"""
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from abu_model.errors import ParameterError
+from abu_model.params import PlantParams, check_finite
+from controller.pi import PISpeedController
+from controller.reference import ROUNDINGS, Staircase
+
+from .master import CoSimResult, CoSimulation
+from .system import Component, Connection, Source, System
+
+FMU_FILES = ("AbuBall", "SpeedController", "Staircase")
+
+#: Units of the table columns ("1": dimensionless).
+UNITS: dict[str, str] = {
+    "time": "s", "side": "1", "omega_ref": "rad/s", "torque": "N m", "torque_applied": "N m",
+    "theta": "rad", "omega": "rad/s", "alpha": "rad/s^2", "beta": "rad", "beta_dot": "rad/s",
+    "normal_force": "N", "friction_force": "N", "mu_req": "1", "mode": "1",
+}
+#: Units of the summary's numbers.
+SUMMARY_UNITS: dict[str, str] = {
+    "mu": "1", "mu_low": "1", "mu_high": "1", "mu_estimate": "1", "t_slip": "s",
+    "omega_slip": "rad/s", "alpha_slip": "rad/s^2", "t_restick": "s", "time_s": "s",
+}
+
+#: Time simulated before the first setpoint step so that the steady state and both limits of
+#: the first step are in the table [s].
+PRE_ROLL = 0.05
+
+_PLANT_PROBES = {
+    "theta": "plant.theta", "omega": "plant.omega", "alpha": "plant.alpha",
+    "beta": "plant.beta", "beta_dot": "plant.beta_dot", "normal_force": "plant.normal_force",
+    "friction_force": "plant.friction_force", "mu_req": "plant.mu_req", "mode": "plant.mode",
+    "torque_applied": "plant.torque_applied",
+}
+
+
+# ---------------------------------------------------------------------------- FMUs
+_FMU_CACHE: dict[str, Path] | None = None
+_FMU_CACHE_DIR: tempfile.TemporaryDirectory | None = None
+
+
+def ensure_fmus(fmu_dir: str | Path | Mapping[str, Path] | None = None) -> dict[str, Path]:
+    """Paths of AbuBall.fmu, SpeedController.fmu and Staircase.fmu.
+
+    Args:
+        fmu_dir: a mapping name -> path (as :func:`fmus.build.build_fmus` returns), a folder
+            (missing FMUs are built into it), or None (built once per process into a
+            temporary folder).
+    """
+    global _FMU_CACHE, _FMU_CACHE_DIR
+    if isinstance(fmu_dir, Mapping):
+        paths = {name: Path(fmu_dir[name]) for name in FMU_FILES if name in fmu_dir}
+        missing = [n for n in FMU_FILES if n not in paths or not paths[n].is_file()]
+        if missing:
+            raise ParameterError("fmu_dir", dict(fmu_dir), f"paths of {', '.join(FMU_FILES)}")
+        return paths
+    from fmus.build import build_fmu
+
+    if fmu_dir is None:
+        if _FMU_CACHE is None:
+            _FMU_CACHE_DIR = tempfile.TemporaryDirectory(prefix="abu_fmus_",
+                                                         ignore_cleanup_errors=True)
+            _FMU_CACHE = {name: build_fmu(name, _FMU_CACHE_DIR.name) for name in FMU_FILES}
+        return dict(_FMU_CACHE)
+    folder = Path(fmu_dir)
+    if folder.exists() and not folder.is_dir():
+        raise ParameterError("fmu_dir", str(fmu_dir), "a folder")
+    paths = {}
+    for name in FMU_FILES:
+        path = folder / f"{name}.fmu"
+        paths[name] = path if path.is_file() else Path(build_fmu(name, folder))
+    return paths
+
+
+def _plant_parameters(plant: PlantParams) -> dict[str, Any]:
+    ball = plant.ball
+    return {"m": ball.m, "d": ball.d, "l": ball.l, "mu": ball.mu,
+            "mu_d": -1.0 if ball.mu_d is None else ball.mu_d, "J_abu": plant.J_abu,
+            "tau_motor": plant.tau_motor, "ball_reaction": plant.ball_reaction}
+
+
+# ---------------------------------------------------------------------------- results
+@dataclass
+class ExperimentResult:
+    """A co-simulated experiment.
+
+    Attributes:
+        table: column -> values, one row per communication point (a discontinuity gives a
+            left row, side -1, and a right row, side +1); units in :data:`UNITS`.
+        summary: bounds, slip point, switches (JSON-ready; units in ``summary["units"]``).
+        cosim: the master's raw result (statistics, notes).
+    """
+
+    table: dict[str, np.ndarray]
+    summary: dict[str, Any]
+    cosim: CoSimResult | None = None
+    units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
+
+
+def _table(res: CoSimResult, extra: Mapping[str, np.ndarray] = {}) -> dict[str, np.ndarray]:
+    table = {"time": res.time.astype(float), "side": res.side.astype(int)}
+    for name, values in res.values.items():
+        table[name] = np.asarray(values, dtype=int if name == "mode" else float)
+    table.update(extra)
+    order = [k for k in UNITS if k in table] + [k for k in table if k not in UNITS]
+    return {k: table[k] for k in order}
+
+
+def _switches(res: CoSimResult, table: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
+    """Switch list {time_s, from_mode, to_mode}; unknown modes are read from the table."""
+    out = []
+    t, mode = table["time"], table["mode"]
+    for sw in res.switches:
+        before, after = sw.before, sw.after
+        if before is None:
+            earlier = np.flatnonzero(t < sw.time - 1e-12)
+            before = int(mode[earlier[-1]]) if earlier.size else None
+        if after is None:
+            later = np.flatnonzero(t > sw.time + 1e-12)
+            after = int(mode[later[0]]) if later.size else None
+        out.append({"time_s": float(sw.time), "from_mode": None if before is None else int(before),
+                    "to_mode": None if after is None else int(after),
+                    "located": bool(sw.located)})
+    return out
+
+
+def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, Any]]
+                    ) -> dict[str, Any]:
+    """mu_low, mu_high and the slip instant of a recorded run (DESIGN.md sec. 3).
+
+    mu_low is the largest mu_req recorded before the first stick -> slip switch, including the
+    left limit at the slip instant; mu_high is mu_req at the right limit there (the last row
+    at that time). If alpha is continuous at the slip, both equal mu. Without a slip,
+    mu_high and t_slip are None and mu_low is the largest mu_req of the whole (stuck) run.
+    """
+    t, side, mu_req = table["time"], table["side"], table["mu_req"]
+    first = next((s for s in switches if s["from_mode"] == 0 and s["to_mode"] != 0), None)
+    if first is None:
+        stuck = table["mode"] == 0
+        return {"mu_low": float(np.max(mu_req[stuck])) if stuck.any() else 0.0,
+                "mu_high": None, "t_slip": None, "omega_slip": None, "alpha_slip": None}
+    t_slip = first["time_s"]
+    at = np.flatnonzero(np.abs(t - t_slip) <= 1e-9)
+    if at.size == 0:  # not on a communication point: take the nearest
+        at = np.array([int(np.argmin(np.abs(t - t_slip)))])
+    right = int(at[-1])
+    before = (t < t[right] - 1e-9) | ((np.abs(t - t[right]) <= 1e-9) & (side == -1))
+    mu_low = float(np.max(mu_req[before])) if before.any() else 0.0
+    return {"mu_low": mu_low, "mu_high": float(mu_req[right]), "t_slip": float(t_slip),
+            "omega_slip": float(table["omega"][right]), "alpha_slip": float(table["alpha"][right])}
+
+
+def _finish_summary(summary: dict[str, Any], res: CoSimResult) -> dict[str, Any]:
+    summary["cosim"] = {"communication_points": int(res.time.size), **res.stats,
+                        "notes": list(res.notes)}
+    summary["units"] = {k: v for k, v in SUMMARY_UNITS.items()}
+    return summary
+
+
+# ---------------------------------------------------------------------------- staircase
+@dataclass(frozen=True)
+class StaircaseExperiment:
+    """The closed-loop staircase experiment of report sec. 4.2 (SI units).
+
+    Attributes:
+        plant: rotor and ball parameters (mu is the "true" friction coefficient).
+        omega0: initial speed and setpoint [rad/s] (steady rotation, ball stuck).
+        omega_end: end of the inclined sine [rad/s].
+        t0: start of the inclined sine (first step with ``lead`` rounding) [s].
+        te: duration of the inclined sine [s] (> 0).
+        t_end: end of the simulation [s]; None: t0 + te + 0.5 s.
+        step: setpoint resolution [rad/s] (2 pi = 1 Hz).
+        rounding: ``lead`` (report), ``nearest`` or ``trail``.
+        theta_ref_mode: ``integral`` (physical PI) or ``thesis`` (theta_ref = t w_ref).
+        zeta, omega_n: identified closed loop [-], [rad/s].
+        comm_step: communication step [s] (> 0).
+        beta0: initial ball angle relative to the ABU [rad].
+        t_start: start of the simulation [s]; None: min(0, t0 - 0.05 s), so that the table
+            holds the steady state and both limits of the first step.
+    """
+
+    plant: PlantParams
+    omega0: float
+    omega_end: float
+    t0: float = 0.0
+    te: float = 1.0
+    t_end: float | None = None
+    step: float = 2.0 * math.pi
+    rounding: str = "lead"
+    theta_ref_mode: str = "integral"
+    zeta: float = 0.5
+    omega_n: float = 2.2
+    comm_step: float = 1e-3
+    beta0: float = 0.0
+    t_start: float | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.plant, PlantParams):
+            raise ParameterError("plant", self.plant, "a PlantParams instance")
+        for name in ("omega0", "omega_end", "t0", "te", "step", "zeta", "omega_n", "comm_step",
+                     "beta0"):
+            object.__setattr__(self, name, check_finite(name, getattr(self, name)))
+        if self.comm_step <= 0.0:
+            raise ParameterError("comm_step", self.comm_step, "a communication step > 0 s")
+        if self.rounding not in ROUNDINGS:
+            raise ParameterError("rounding", self.rounding, f"one of {', '.join(ROUNDINGS)}")
+        self.staircase  # validates te, step, omega_end (at least one step)
+        self.controller  # validates zeta, omega_n, theta_ref_mode
+        t_start = (min(0.0, self.t0 - PRE_ROLL) if self.t_start is None
+                   else check_finite("t_start", self.t_start))
+        if t_start > self.t0:
+            raise ParameterError("t_start", self.t_start, f"a time <= t0 = {self.t0:g} s")
+        object.__setattr__(self, "t_start", t_start)
+        t_end = self.t0 + self.te + 0.5 if self.t_end is None else check_finite("t_end", self.t_end)
+        if t_end <= t_start:
+            raise ParameterError("t_end", self.t_end, f"a time > the start {t_start:g} s")
+        object.__setattr__(self, "t_end", t_end)
+        if self.omega0 == 0.0:
+            raise ParameterError("omega0", self.omega0, "a non-zero speed (no normal force at "
+                                 "rest: the ball cannot stick)")
+
+    @property
+    def staircase(self) -> Staircase:
+        """The setpoint staircase (exact step times)."""
+        return Staircase(self.omega0, self.omega_end, self.t0, self.te, self.step, self.rounding)
+
+    @property
+    def controller(self) -> PISpeedController:
+        """The PI speed law (gains scaled with the plant's J_abu)."""
+        return PISpeedController(self.zeta, self.omega_n, self.plant.J_abu, self.theta_ref_mode)
+
+    def system(self, fmus: Mapping[str, Path]) -> System:
+        """The co-simulated system: Staircase -> SpeedController <-> AbuBall."""
+        plant = _plant_parameters(self.plant)
+        plant.update(theta0=self.omega0 * self.t_start, omega0=self.omega0, beta0=self.beta0,
+                     beta_dot0=0.0)
+        return System(
+            components=(
+                Component("ref", fmus["Staircase"], {
+                    "omega0": self.omega0, "omega_end": self.omega_end, "t0": self.t0,
+                    "te": self.te, "step": self.step, "rounding": ROUNDINGS.index(self.rounding)}),
+                Component("ctrl", fmus["SpeedController"], {
+                    "zeta": self.zeta, "omega_n": self.omega_n, "J_abu": self.plant.J_abu,
+                    "theta_ref_mode": ("integral", "thesis").index(self.theta_ref_mode),
+                    "x_I0": 0.0}),
+                Component("plant", fmus["AbuBall"], plant),
+            ),
+            connections=(
+                Connection("ref.omega_ref", "ctrl.omega_ref"),
+                Connection("plant.omega", "ctrl.omega"),
+                Connection("plant.theta", "ctrl.theta"),
+                Connection("plant.alpha", "ctrl.alpha"),
+                Connection("ctrl.torque", "plant.torque"),
+                Connection("ctrl.torque_rate", "plant.torque_rate"),
+            ),
+            probes={"omega_ref": "ref.omega_ref", "torque": "ctrl.torque", **_PLANT_PROBES},
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """The settings, JSON-ready (SI; keys with units)."""
+        b = self.plant.ball
+        return {"motion": "staircase", "mu": b.mu, "mu_d": b.mu_dynamic, "m_kg": b.m, "d_m": b.d,
+                "l_m": b.l, "J_abu_kg_m2": self.plant.J_abu, "tau_motor_s": self.plant.tau_motor,
+                "ball_reaction": self.plant.ball_reaction, "omega0_rad_s": self.omega0,
+                "omega_end_rad_s": self.omega_end, "t0_s": self.t0, "te_s": self.te,
+                "t_start_s": self.t_start, "t_end_s": self.t_end, "step_rad_s": self.step,
+                "rounding": self.rounding, "theta_ref_mode": self.theta_ref_mode,
+                "zeta": self.zeta, "omega_n_rad_s": self.omega_n, "comm_step_s": self.comm_step,
+                "beta0_rad": self.beta0,
+                "step_times_s": list(self.staircase.step_times)}
+
+
+def run_staircase(exp: StaircaseExperiment, fmu_dir: Any = None,
+                  progress: bool = False) -> ExperimentResult:
+    """Co-simulate the staircase experiment and compute the friction bounds."""
+    fmus = ensure_fmus(fmu_dir)
+    with CoSimulation(exp.system(fmus), exp.t_start, exp.t_end, exp.comm_step,
+                      progress=progress) as sim:
+        res = sim.run()
+    table = _table(res)
+    switches = _switches(res, table)
+    bounds = friction_bounds(table, switches)
+    mu = exp.plant.ball.mu
+    summary: dict[str, Any] = {"experiment": exp.as_dict(), **bounds, "mu": mu,
+                               "switches": switches, "slips": bounds["t_slip"] is not None}
+    step_times = exp.staircase.step_times
+    if bounds["t_slip"] is None:
+        summary["message"] = ("the ball never slips: mu_low is a lower bound only "
+                              "(mu_high and t_slip are null)")
+        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu)
+    else:
+        at_step = any(abs(bounds["t_slip"] - ts) <= 1e-9 for ts in step_times)
+        summary["slip_at_setpoint_step"] = at_step
+        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu <= bounds["mu_high"])
+        if bounds["mu_low"] == 0.0:
+            summary["message"] = ("the ball slips at the first acceleration step: no stick period "
+                                  "with acceleration, mu_low = 0 carries no information; start "
+                                  "at a higher |omega0|")
+        else:
+            summary["message"] = (f"mu_low = {bounds['mu_low']:.4g} <= mu < mu_high = "
+                                  f"{bounds['mu_high']:.4g} (slip at t = {bounds['t_slip']:.6g} s)")
+    return ExperimentResult(table, _finish_summary(summary, res), res)
+
+
+# ---------------------------------------------------------------------------- ramp
+@dataclass(frozen=True)
+class RampExperiment:
+    """Prescribed motion of report sec. 4.1: alpha(t) = sign(omega0) K t from steady rotation.
+
+    The rotor is driven by the external torque T = J_total K sign(omega0) t (first-order held
+    through the plant's torque_rate input), which with tau_motor = 0 gives exactly
+    alpha = sign(omega0) K t while the ball sticks, and omega = omega0 + sign(omega0) K t^2/2.
+
+    Attributes:
+        plant: rotor and ball parameters.
+        omega0: initial speed [rad/s] (non-zero).
+        jerk: K, growth rate of |alpha| [rad/s^3] (> 0).
+        t_end: end of the simulation [s] (> 0).
+        comm_step: communication step [s] (> 0).
+        beta0: initial ball angle [rad].
+    """
+
+    plant: PlantParams
+    omega0: float
+    jerk: float
+    t_end: float
+    comm_step: float = 1e-3
+    beta0: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.plant, PlantParams):
+            raise ParameterError("plant", self.plant, "a PlantParams instance")
+        for name in ("omega0", "jerk", "t_end", "comm_step", "beta0"):
+            object.__setattr__(self, name, check_finite(name, getattr(self, name)))
+        if self.omega0 == 0.0:
+            raise ParameterError("omega0", self.omega0, "a non-zero speed [rad/s]")
+        if self.jerk <= 0.0:
+            raise ParameterError("jerk", self.jerk, "a jerk K > 0 rad/s^3")
+        if self.t_end <= 0.0:
+            raise ParameterError("t_end", self.t_end, "a time > 0 s")
+        if self.comm_step <= 0.0:
+            raise ParameterError("comm_step", self.comm_step, "a communication step > 0 s")
+
+    @property
+    def torque_slope(self) -> float:
+        """dT/dt = J_total K sign(omega0) [N m/s]."""
+        return self.plant.J_total * self.jerk * math.copysign(1.0, self.omega0)
+
+    def system(self, fmus: Mapping[str, Path]) -> System:
+        """AbuBall alone with the torque ramp and its rate as sources."""
+        slope = self.torque_slope
+        plant = _plant_parameters(self.plant)
+        plant.update(theta0=0.0, omega0=self.omega0, beta0=self.beta0, beta_dot0=0.0)
+        return System(
+            components=(Component("plant", fmus["AbuBall"], plant),),
+            sources=(Source("plant.torque", lambda t: slope * t),
+                     Source("plant.torque_rate", lambda t: slope)),
+            probes={"torque": "plant.torque", **_PLANT_PROBES})
+
+    def as_dict(self) -> dict[str, Any]:
+        b = self.plant.ball
+        return {"motion": "ramp", "mu": b.mu, "mu_d": b.mu_dynamic, "m_kg": b.m, "d_m": b.d,
+                "l_m": b.l, "J_abu_kg_m2": self.plant.J_abu, "tau_motor_s": self.plant.tau_motor,
+                "ball_reaction": self.plant.ball_reaction, "omega0_rad_s": self.omega0,
+                "jerk_rad_s3": self.jerk, "t_end_s": self.t_end, "comm_step_s": self.comm_step,
+                "beta0_rad": self.beta0}
+
+
+def run_ramp(exp: RampExperiment, fmu_dir: Any = None, progress: bool = False) -> ExperimentResult:
+    """Co-simulate the prescribed-acceleration ramp and estimate mu at the slip (eq. 4.1/4.2)."""
+    fmus = ensure_fmus(fmu_dir)
+    with CoSimulation(exp.system(fmus), 0.0, exp.t_end, exp.comm_step, progress=progress) as sim:
+        res = sim.run()
+    s = math.copysign(1.0, exp.omega0)
+    omega_ref = exp.omega0 + s * exp.jerk * res.time**2 / 2.0  # the prescribed speed
+    table = _table(res, {"omega_ref": omega_ref})
+    switches = _switches(res, table)
+    bounds = friction_bounds(table, switches)
+    ball = exp.plant.ball
+    summary: dict[str, Any] = {"experiment": exp.as_dict(), "mu": ball.mu, "switches": switches,
+                               "t_slip": bounds["t_slip"], "omega_slip": bounds["omega_slip"],
+                               "alpha_slip": bounds["alpha_slip"], "slips": False,
+                               "mu_estimate": None, "t_restick": None}
+    if bounds["t_slip"] is not None:
+        w, a = bounds["omega_slip"], bounds["alpha_slip"]
+        summary["slips"] = True
+        summary["mu_estimate"] = (ball.l - ball.d / 5.0) * abs(a) / (ball.l * w * w)
+        restick = next((sw for sw in switches
+                        if sw["time_s"] > bounds["t_slip"] and sw["to_mode"] == 0), None)
+        summary["t_restick"] = None if restick is None else restick["time_s"]
+        summary["message"] = (f"slip at t = {bounds['t_slip']:.9g} s: mu estimate "
+                              f"{summary['mu_estimate']:.6g} (eq. 4.1/4.2)")
+    else:
+        summary["message"] = "the ball never slips within t_end: no estimate"
+    episodes = sum(1 for sw in switches if sw["from_mode"] == 0)
+    summary["slip_episodes"] = episodes
+    return ExperimentResult(table, _finish_summary(summary, res), res)
+
+
+def with_plant(exp: StaircaseExperiment | RampExperiment, **changes: Any):
+    """A copy of ``exp`` with plant parameters changed (e.g. ``mu=...``, ``tau_motor=...``)."""
+    ball_fields = {"m", "d", "l", "mu", "mu_d"}
+    ball = exp.plant.ball.with_(**{k: v for k, v in changes.items() if k in ball_fields})
+    plant = replace(exp.plant, ball=ball,
+                    **{k: v for k, v in changes.items() if k not in ball_fields})
+    return replace(exp, plant=plant)
