@@ -74,20 +74,27 @@ def noise_sigma(signal: np.ndarray, order: int = 3) -> float:
     return float(1.4826 * mad / math.sqrt(math.comb(2 * order, order)))
 
 
-def sample_interval(time: np.ndarray, rtol: float = 1e-3) -> float:
-    """The constant sample interval [s] of ``time``; raises if the sampling is not uniform."""
+def sample_interval(time: np.ndarray, tolerance: float = 0.01) -> float:
+    """The constant sample interval [s] of ``time``; raises if the sampling is not uniform.
+
+    The times must lie on a uniform grid t0 + i dt (dt from the first and last time) within
+    ``tolerance`` frame intervals, which accepts times rounded to a few digits (e.g. 1 us at
+    4500 frames/s is 0.005 frame) but not dropped or duplicated frames.
+    """
     t = np.asarray(time, dtype=float)
     if t.size < 3:
         raise ParameterError("time", f"{t.size} samples", "at least 3 samples")
-    steps = np.diff(t)
-    dt = float(np.median(steps))
-    if dt <= 0.0:
+    dt = float(t[-1] - t[0]) / (t.size - 1)
+    if not dt > 0.0:
         raise ParameterError("time", "non-increasing", "strictly increasing times")
-    worst = int(np.argmax(np.abs(steps - dt)))
-    if abs(steps[worst] - dt) > rtol * dt:
+    off = (t - t[0]) / dt - np.arange(t.size)
+    worst = int(np.argmax(np.abs(off)))
+    if abs(off[worst]) > tolerance:
         raise ParameterError(
-            "time", f"step {steps[worst]!r} s between samples {worst} and {worst + 1}",
-            f"uniform sampling (every step within {rtol:g} of the median {dt!r} s)")
+            "time", f"{float(t[worst])!r} s at sample {worst}, {float(off[worst]):+.3f} frame "
+            "intervals off the uniform grid",
+            f"uniform sampling (every time within {tolerance:g} frame interval of "
+            f"t0 + i * {dt!r} s)")
     return dt
 
 

@@ -209,24 +209,26 @@ def fill_lost(time: np.ndarray, values: np.ndarray, lost: np.ndarray, *,
         if not flags.any():
             continue
         frames = np.flatnonzero(flags)
-        if flags[0] or flags[-1]:
-            frame = 0 if flags[0] else n - 1
-            raise LostMarkerError(f"marker '{name}' lost in frame {frame} (first/last frame): "
-                                  "cannot interpolate; re-track with other seeds or another method")
-        if frames.size > max_fraction * n:
-            raise LostMarkerError(f"marker '{name}' lost in {frames.size} of {n} frames (first "
-                                  f"lost frame {frames[0]}); at most {max_fraction:.0%} are "
-                                  "interpolated")
         # Runs of consecutive lost frames.
         breaks = np.flatnonzero(np.diff(frames) > 1)
         starts = np.r_[frames[0], frames[breaks + 1]]
         ends = np.r_[frames[breaks], frames[-1]]
+        if flags[0] or flags[-1]:
+            k = 0 if flags[0] else len(starts) - 1
+            edge = "first" if flags[0] else "last"
+            raise LostMarkerError(f"marker '{name}' lost in frames {starts[k]}-{ends[k]} (up to the "
+                                  f"{edge} frame, {n} frames in all): cannot interpolate; re-track "
+                                  "with other seeds or another method")
         longest = int(np.argmax(ends - starts))
         if ends[longest] - starts[longest] + 1 > max_gap:
             raise LostMarkerError(
                 f"marker '{name}' lost in frames {starts[longest]}-{ends[longest]} "
                 f"({ends[longest] - starts[longest] + 1} consecutive frames, at most {max_gap} "
                 "are interpolated)")
+        if frames.size > max_fraction * n:
+            raise LostMarkerError(f"marker '{name}' lost in {frames.size} of {n} frames (first "
+                                  f"lost frame {frames[0]}); at most {max_fraction:.0%} are "
+                                  "interpolated")
         good = ~flags
         out[flags, j] = np.interp(time[flags], time[good], out[good, j])
     return out

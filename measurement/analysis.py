@@ -1,0 +1,291 @@
+"""The analysis pipeline: marker tracks -> theta, beta -> omega, omega_dot -> [mu_low, mu_high].
+
+:func:`analyse_tracks` runs, in order:
+
+1. lost markers: short gaps interpolated, long ones rejected (:func:`tracks_io.fill_lost`);
+2. theta, beta from the pixel coordinates (:func:`tracks_io.angles_from_pixels`);
+3. omega, omega_dot with noise error bars (:mod:`kinematics`, ``savgol`` or ``report``);
+4. the lighting harmonic removed from beta (:mod:`harmonic`);
+5. the slip window and the interval (:mod:`interval`);
+6. the report's worst-case error analysis and, with ``mc_draws`` > 0, a Monte Carlo propagation of
+   the measured tracking noise (:mod:`uncertainty`).
+
+It returns a table of time series (column names carry their units) and a JSON-ready summary.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from abu_model.errors import AbuError, ParameterError
+from abu_model.params import check_positive
+
+from . import harmonic as harmonic_mod
+from . import interval as interval_mod
+from . import kinematics as kin_mod
+from . import tracks_io, uncertainty
+
+PHASES = ("ball", "cd")
+
+
+class AnalysisError(AbuError, ValueError):
+    """The tracks cannot be analysed (non-uniform sampling, too short, bad shapes)."""
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """Settings of :func:`analyse_tracks` (SI units; names ending ``_s`` are seconds).
+
+    Attributes:
+        estimator: ``savgol`` (default) or ``report`` (decimation + central difference + global
+            polynomial, report sec. 5.2).
+        sg_window_s, sg_polyorder: Savitzky-Golay window [s] and degree.
+        decimation, poly_degree: the report estimator's block length and polynomial degree.
+        trim_s: time excluded from the trusted region at each end [s]; None: 0 for ``savgol``
+            (beyond its half window), 0.05 s for ``report`` (the report's own choice).
+        harmonic: remove the lighting harmonic from beta.
+        harmonic_orders: harmonic orders fitted (1 = rotation frequency).
+        harmonic_amp_degree: polynomial degree in time of the harmonic's amplitude.
+        harmonic_phase: ``ball`` (ball angle in the image, theta + beta) or ``cd`` (theta).
+        knot_spacing_s: knot spacing of the monotone beta basis [s].
+        interval: :class:`interval.IntervalOptions`.
+        mc_draws: Monte Carlo draws (0: none).
+        seed: Monte Carlo seed.
+        e_omega, e_omega_dot: relative error bounds of the report's worst case (0.03, 0.05).
+        max_lost_gap, max_lost_fraction: limits for interpolating lost markers.
+    """
+
+    estimator: str = "savgol"
+    sg_window_s: float = 0.02
+    sg_polyorder: int = 3
+    decimation: int = 10
+    poly_degree: int = 10
+    trim_s: float | None = None
+    harmonic: bool = True
+    harmonic_orders: tuple[int, ...] = (1,)
+    harmonic_amp_degree: int = 0
+    harmonic_phase: str = "ball"
+    knot_spacing_s: float = 0.005
+    interval: interval_mod.IntervalOptions = field(default_factory=interval_mod.IntervalOptions)
+    mc_draws: int = 0
+    seed: int = 0
+    e_omega: float = uncertainty.REPORT_E_OMEGA
+    e_omega_dot: float = uncertainty.REPORT_E_OMEGA_DOT
+    max_lost_gap: int = 5
+    max_lost_fraction: float = 0.02
+
+    def __post_init__(self) -> None:
+        if self.estimator not in kin_mod.ESTIMATORS:
+            raise ParameterError("estimator", self.estimator,
+                                 f"one of {', '.join(kin_mod.ESTIMATORS)}")
+        if self.harmonic_phase not in PHASES:
+            raise ParameterError("harmonic_phase", self.harmonic_phase,
+                                 f"one of {', '.join(PHASES)}")
+        if int(self.mc_draws) < 0:
+            raise ParameterError("mc_draws", self.mc_draws, "an integer >= 0")
+        check_positive("sg_window_s", self.sg_window_s, "s")
+        check_positive("knot_spacing_s", self.knot_spacing_s, "s")
+        if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
+            raise ParameterError("trim_s", self.trim_s, ">= 0 s")
+
+    def with_(self, **changes: Any) -> "AnalysisOptions":
+        """A copy with ``changes`` applied (validated again)."""
+        return replace(self, **changes)
+
+
+def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
+    if opt.estimator == "savgol":
+        return kin_mod.savgol_kinematics(time, theta, window_s=opt.sg_window_s,
+                                         polyorder=opt.sg_polyorder,
+                                         trim_s=0.0 if opt.trim_s is None else opt.trim_s)
+    return kin_mod.report_kinematics(time, theta, decimation=opt.decimation,
+                                     degree=opt.poly_degree,
+                                     trim_s=0.05 if opt.trim_s is None else opt.trim_s)
+
+
+def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
+          opt: AnalysisOptions) -> dict:
+    """Angles, kinematics, harmonic removal and interval for filled coordinates."""
+    theta, beta = tracks_io.angles_from_pixels(x, y)
+    kin = _kinematics(time, theta, opt)
+    trusted = kin.trusted
+    med = float(np.median(kin.omega_dot[trusted])) if trusted.any() else 0.0
+    direction = -1 if med > 0 else 1
+    if opt.harmonic:
+        phase = theta + beta if opt.harmonic_phase == "ball" else theta
+        harm = harmonic_mod.remove_harmonic(
+            time, beta, phase, orders=tuple(opt.harmonic_orders),
+            amp_degree=opt.harmonic_amp_degree, knot_spacing_s=opt.knot_spacing_s,
+            direction=direction)
+    else:
+        harm = harmonic_mod.remove_harmonic(time, beta, theta, orders=(),
+                                            knot_spacing_s=opt.knot_spacing_s,
+                                            direction=direction)
+    iv = interval_mod.slip_interval(time, kin.omega, kin.omega_dot, kin.sigma_omega,
+                                    kin.sigma_omega_dot, trusted, harm.beta_clean, harm.residual,
+                                    l=l, d=d, options=opt.interval, direction=direction)
+    return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv}
+
+
+def _validate(time, x, y, lost, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape != y.shape:
+        raise AnalysisError(f"marker coordinates must be two (N, 3) arrays (centre, CD, ball); "
+                            f"got {x.shape} and {y.shape}")
+    n = x.shape[0]
+    if time is None:
+        if fps is None:
+            raise ParameterError("fps", fps, "a frame rate > 0 Hz when no times are given")
+        fps = check_positive("fps", fps, "Hz")
+        time = np.arange(n) / fps
+    time = np.asarray(time, dtype=float)
+    if time.shape != (n,):
+        raise AnalysisError(f"{time.shape[0] if time.ndim else 0} times for {n} frames")
+    if n < tracks_io.MIN_ROWS:
+        raise AnalysisError(f"{n} frames; the analysis needs at least {tracks_io.MIN_ROWS}")
+    try:
+        kin_mod.sample_interval(time)
+    except ParameterError as exc:
+        raise AnalysisError(f"the frame times are not uniformly sampled: {exc}") from None
+    lost = np.zeros((n, 3), dtype=bool) if lost is None else np.asarray(lost, dtype=bool)
+    if lost.shape != (n, 3):
+        raise AnalysisError(f"lost flags must be (N, 3); got {lost.shape}")
+    bad = ~(np.isfinite(x) & np.isfinite(y)) & ~lost
+    if bad.any():
+        frame, marker = np.argwhere(bad)[0]
+        raise AnalysisError(f"non-finite coordinate of marker '{tracks_io.MARKERS[marker]}' in "
+                            f"frame {frame} (not flagged as lost)")
+    return time, x, y, lost
+
+
+def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
+                   l: float = 1.15e-2, d: float = 3.0e-3, fps: float | None = None,
+                   lost: np.ndarray | None = None,
+                   options: AnalysisOptions | None = None) -> tuple[dict[str, np.ndarray], dict]:
+    """Analyse one record of marker tracks.
+
+    Args:
+        time: frame times [s] (uniform), or None to use ``arange(N) / fps``.
+        x, y: (N, 3) pixel coordinates of centre, CD, ball (OpenCV: x column, y row down).
+        l, d: ball path radius and ball diameter [m].
+        fps: frame rate [1/s], only used when ``time`` is None.
+        lost: (N, 3) bool, markers the tracker lost (interpolated if the gaps are short).
+        options: :class:`AnalysisOptions`.
+
+    Returns:
+        (table, summary): ``table`` maps column names (with units) to (N,) arrays; ``summary`` is
+        JSON-ready (see docs/measurement-analysis.md for every key).
+
+    Raises:
+        AnalysisError, ParameterError, tracks_io.LostMarkerError: bad input, with the reason.
+    """
+    opt = options or AnalysisOptions()
+    l = check_positive("l", l, "m")
+    d = check_positive("d", d, "m")
+    if d >= 2.0 * l:
+        raise ParameterError("d", d, f"a ball diameter < 2 l = {2 * l:g} m")
+    time, x, y, lost = _validate(time, x, y, lost, fps)
+    x = tracks_io.fill_lost(time, x, lost, max_gap=opt.max_lost_gap,
+                            max_fraction=opt.max_lost_fraction)
+    y = tracks_io.fill_lost(time, y, lost, max_gap=opt.max_lost_gap,
+                            max_fraction=opt.max_lost_fraction)
+    core = _core(time, x, y, l, d, opt)
+    kin, harm, iv = core["kin"], core["harm"], core["iv"]
+    dt = kin_mod.sample_interval(time)
+
+    table = {
+        "time_s": time, "theta_rad": core["theta"], "beta_rad": core["beta"],
+        "beta_clean_rad": harm.beta_clean, "beta_smooth_rad": harm.beta_smooth,
+        "harmonic_rad": harm.harmonic, "slip_deviation_rad": iv.deviation,
+        "omega_rad_s": kin.omega, "sigma_omega_rad_s": kin.sigma_omega,
+        "omega_dot_rad_s2": kin.omega_dot, "sigma_omega_dot_rad_s2": kin.sigma_omega_dot,
+        "mu_req": iv.mu_req, "mu_req_lo": iv.mu_req_lo, "mu_req_hi": iv.mu_req_hi,
+        "running_max_lo": iv.running_max_lo, "running_max_hi": iv.running_max_hi,
+        "trusted": kin.trusted.astype(int), "lost": tracks_io.lost_bitmask(lost),
+    }
+
+    def at(arr: np.ndarray, t: float | None) -> float | None:
+        if t is None:
+            return None
+        return float(arr[int(round((t - time[0]) / dt))])
+
+    def attained(running: np.ndarray, values: np.ndarray, t: float | None) -> float | None:
+        # Time at which the running maximum's value at t was reached.
+        if t is None:
+            return None
+        i = int(round((t - time[0]) / dt))
+        seg = np.flatnonzero(kin.trusted[: i + 1])
+        return float(time[seg[np.nanargmax(values[seg])]]) if seg.size else None
+
+    t_lo_at = attained(iv.running_max_lo, iv.mu_req_lo, iv.t_a)
+    t_hi_at = attained(iv.running_max_hi, iv.mu_req_hi, iv.t_b)
+    measured = {}
+    for tag, t_at in (("low", t_lo_at), ("high", t_hi_at)):
+        if t_at is None:
+            continue
+        w, a = abs(at(kin.omega, t_at)), abs(at(kin.omega_dot, t_at))
+        measured[f"t_{tag}_attained"] = t_at
+        measured[f"e_omega_{tag}"] = at(kin.sigma_omega, t_at) / w if w > 0 else None
+        measured[f"e_omega_dot_{tag}"] = at(kin.sigma_omega_dot, t_at) / a if a > 0 else None
+    mu_low, mu_high = iv.mu_low, iv.mu_high
+    width = None
+    if mu_low is not None and mu_high is not None:
+        width = (mu_high - mu_low) / (0.5 * (mu_high + mu_low))
+
+    summary: dict[str, Any] = {
+        "mu_low": mu_low, "mu_high": mu_high,
+        "t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
+        "relative_width": width,
+        "status": iv.status,
+        "mu_low_creep_model": iv.mu_creep,
+        "mu_low_no_error_bars": at(iv.running_max, iv.t_a),
+        "mu_high_no_error_bars": at(iv.running_max, iv.t_b),
+        "slip_direction": iv.direction,
+        "beta_stick_rad": iv.beta_stick,
+        "estimator": {"name": kin.method, **kin.settings,
+                      "trusted_start_s": iv.details["trusted_start_s"],
+                      "trusted_end_s": iv.details["trusted_end_s"]},
+        "slip_detection": {"lower_method": opt.interval.lower, "k_sigma": opt.interval.k_sigma,
+                           "smooth_s": opt.interval.smooth_s,
+                           "reference_s": opt.interval.reference_s,
+                           "sigma_deviation_rad": iv.sigma_deviation,
+                           "threshold_rad": iv.threshold,
+                           **({"creep_threshold_sigma": iv.details["creep_threshold_sigma"]}
+                              if "creep_threshold_sigma" in iv.details else {})},
+        "noise": {
+            "sigma_px": uncertainty.pixel_noise(x, y).tolist(),
+            "sigma_theta_rad": kin.sigma_theta,
+            "sigma_beta_rad": iv.details["sigma_beta_rad"],
+            "sigma_omega_rad_s": float(np.median(kin.sigma_omega[kin.trusted])),
+            "sigma_omega_dot_rad_s2": float(np.median(kin.sigma_omega_dot[kin.trusted])),
+            "harmonic_amplitude_max_rad": float(np.max(harm.amplitude)) if opt.harmonic else 0.0,
+            "beta_fit_residual_rad": harm.residual_sigma,
+        },
+        "frames": int(time.size), "fps_hz": 1.0 / dt, "duration_s": float(time[-1] - time[0]),
+        "lost_frames": {**{name: int(lost[:, j].sum()) for j, name in
+                           enumerate(tracks_io.MARKERS)}, "any": int(lost.any(axis=1).sum())},
+        "geometry": {"l_m": l, "d_m": d},
+        "error_analysis": uncertainty.error_analysis(mu_low, mu_high, e_omega=opt.e_omega,
+                                                     e_omega_dot=opt.e_omega_dot,
+                                                     measured=measured),
+        "monte_carlo": None,
+    }
+    if opt.mc_draws > 0:
+        def run(xn: np.ndarray, yn: np.ndarray) -> tuple[float | None, float | None]:
+            out = _core(time, xn, yn, l, d, opt)["iv"]
+            return out.mu_low, out.mu_high
+
+        summary["monte_carlo"] = uncertainty.monte_carlo(
+            run, x, y, np.asarray(summary["noise"]["sigma_px"]), draws=opt.mc_draws,
+            seed=opt.seed)
+    summary["units"] = {
+        "mu_low": "1", "mu_high": "1", "t_slip_low": "s", "t_slip_high": "s",
+        "relative_width": "1 ((mu_high - mu_low) / mid-point)", "sigma_px": "px",
+        "e_*": "1 (relative)", "t_*": "s", "*_rad": "rad", "*_rad_s": "rad/s",
+        "*_rad_s2": "rad/s^2", "*_s": "s", "*_m": "m", "*_hz": "1/s",
+    }
+    return table, summary

@@ -1,0 +1,403 @@
+"""Measurement commands of the ``abu`` command line: ``track``, ``measure``, ``measure-summary``,
+``render``.
+
+``harness/cli.py`` builds the main parser and calls :func:`register`; every subcommand sets
+``func`` (``args -> exit status``). Errors derived from :class:`abu_model.errors.AbuError` are
+printed by the main program, which exits with status 2. :func:`main` is a stand-alone entry
+point with the same behaviour (used by the tests and ``python -m measurement.cli``).
+
+Outputs are computed completely before anything is written, and every file is written
+atomically, so a failing command leaves no half-written file behind.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from abu_model.atomic_io import atomic_write_text
+from abu_model.errors import AbuError, ParameterError
+
+DEFAULT_FPS = 4500.0
+DEFAULT_L = 1.15e-2
+DEFAULT_D = 3.0e-3
+
+
+# ------------------------------------------------------------------------------ helpers
+
+def _positive(name: str, value: float | None, unit: str) -> float | None:
+    if value is None:
+        return None
+    if not (math.isfinite(value) and value > 0):
+        raise ParameterError(name, value, f"a finite number > 0 {unit}".rstrip())
+    return float(value)
+
+
+def json_ready(obj: Any) -> Any:
+    """Replace non-finite floats by None and NumPy scalars/arrays by Python values."""
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_ready(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def dumps(obj: Any) -> str:
+    """Strict JSON text (no NaN) of ``obj``."""
+    return json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n"
+
+
+def format_table_csv(table: dict[str, np.ndarray]) -> str:
+    """CSV text of a table of equal-length columns (names carry the units)."""
+    names = list(table)
+    cols = [np.asarray(table[n]) for n in names]
+    lines = ["# units are in the column names (_s, _rad, _rad_s, _rad_s2); mu_* and "
+             "running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball",
+             ",".join(names)]
+    for i in range(cols[0].shape[0]):
+        cells = []
+        for c in cols:
+            v = c[i]
+            if np.issubdtype(c.dtype, np.integer):
+                cells.append(str(int(v)))
+            else:
+                cells.append("" if not math.isfinite(float(v)) else f"{float(v):.10g}")
+        lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def _log(args: argparse.Namespace, message: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(message, file=sys.stderr)
+
+
+# ------------------------------------------------------------------------------ tracking
+
+def _track_frames(args: argparse.Namespace, fps: float) -> dict:
+    """Read the recording, find or parse the seeds, track; returns the pieces for writing."""
+    from .frames_io import read_recording
+    from .markers import find_markers, format_seeds, parse_seeds
+    from .tracking import track_recording
+    from . import tracks_io
+
+    rec = read_recording(args.input)
+    frames = rec.frames
+    if args.seeds is not None:
+        seeds = parse_seeds(args.seeds)
+        roles_note = "given by --seeds"
+    else:
+        seeds, roles = find_markers(np.asarray(frames[0]), dark=args.dark_markers)
+        roles_note = "found in frame 0"
+        _log(args, "markers found in frame 0 (x, y px): " + ", ".join(
+            f"{role} ({sx:.2f}, {sy:.2f})" for role, (sx, sy) in zip(roles, seeds)))
+        _log(args, f"  reuse or correct with --seeds '{format_seeds(seeds)}'")
+    h, w = frames.shape[1:]
+    for i, (sx, sy) in enumerate(seeds):
+        if not (0 <= sx <= w - 1 and 0 <= sy <= h - 1):
+            raise ParameterError("--seeds", format_seeds(seeds),
+                                 f"positions inside the {w}x{h} px frame (position {i + 1} "
+                                 "is outside)")
+    tracks = track_recording(frames, seeds, method=args.method, window=args.window,
+                             dark=args.dark_markers, progress=args.progress)
+    time = np.arange(tracks.n_frames) / fps
+    lost = np.asarray(tracks.lost, dtype=bool)
+    try:
+        x = tracks_io.fill_lost(time, tracks.x, lost)
+        y = tracks_io.fill_lost(time, tracks.y, lost)
+    except tracks_io.LostMarkerError as exc:
+        # Name the frame as the recording knows it (file name for a folder of frames).
+        reasons = tracks.lost_summary()
+        raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: {reasons}") from None
+    return {"time": time, "x": x, "y": y, "lost": lost, "seeds": seeds, "source": rec.source,
+            "seeds_note": roles_note, "method": tracks.method, "window": tracks.window,
+            "lost_reasons": tracks.lost_summary()}
+
+
+def _tracking_info(tr: dict, fps: float) -> dict:
+    from .markers import format_seeds
+    return {"source": tr["source"], "seeds_px": format_seeds(tr["seeds"]),
+            "seeds": tr["seeds_note"], "roles": ["center", "cd", "ball"],
+            "method": tr["method"], "window_px": tr["window"], "fps_hz": fps,
+            "frames": int(tr["time"].size),
+            "lost_frames": {name: int(tr["lost"][:, j].sum())
+                            for j, name in enumerate(["center", "cd", "ball"])},
+            "lost_reasons": tr["lost_reasons"]}
+
+
+def cmd_track(args: argparse.Namespace) -> int:
+    """``abu track INPUT --out DIR``: marker tracks only (tracks.csv, tracking.json)."""
+    from . import tracks_io
+    fps = _positive("--fps", args.fps, "frames/s") or DEFAULT_FPS
+    tr = _track_frames(args, fps)
+    out = Path(args.out)
+    theta, beta = tracks_io.angles_from_pixels(tr["x"], tr["y"])
+    csv_text = tracks_io.format_tracks_csv(tr["time"], theta, beta, tr["x"], tr["y"], tr["lost"])
+    info = _tracking_info(tr, fps)
+    atomic_write_text(out / "tracks.csv", csv_text)
+    atomic_write_text(out / "tracking.json", dumps(info))
+    _log(args, f"wrote {out / 'tracks.csv'} ({info['frames']} frames, lost "
+               f"{info['lost_frames']})")
+    return 0
+
+
+# ------------------------------------------------------------------------------ measure
+
+def _analysis_options(args: argparse.Namespace):
+    from .analysis import AnalysisOptions
+    from .interval import IntervalOptions
+    if args.mc_draws < 0:
+        raise ParameterError("--mc-draws", args.mc_draws, "an integer >= 0")
+    return AnalysisOptions(
+        estimator=args.estimator, sg_window_s=_positive("--sg-window-s", args.sg_window_s, "s"),
+        poly_degree=args.poly_degree, trim_s=args.trim_s, harmonic=not args.no_harmonic,
+        harmonic_phase=args.harmonic_phase,
+        interval=IntervalOptions(k_sigma=_positive("--k-sigma", args.k_sigma, ""),
+                                 lower=args.lower),
+        mc_draws=args.mc_draws, seed=args.seed)
+
+
+def cmd_measure(args: argparse.Namespace) -> int:
+    """``abu measure INPUT --out DIR``: track (or read tracks) and analyse."""
+    from . import tracks_io
+    from .analysis import analyse_tracks
+    from .plots import plot_analysis
+
+    l = _positive("--l", args.l, "m")
+    d = _positive("--d", args.d, "m")
+    fps_opt = _positive("--fps", args.fps, "frames/s")
+    options = _analysis_options(args)
+    out = Path(args.out)
+    if args.tracks:
+        table_in = tracks_io.read_tracks_csv(args.input)
+        time, x, y, lost = table_in.time, table_in.x, table_in.y, table_in.lost
+        if fps_opt is not None:
+            dt = float(np.median(np.diff(time)))
+            if abs(dt * fps_opt - 1.0) > 1e-3:
+                raise ParameterError("--fps", fps_opt, f"the frame rate of the tracks file "
+                                     f"{args.input} ({1.0 / dt:.6g} frames/s from its time "
+                                     "column), or leave --fps out")
+        tracking = {"source": str(args.input), "tracks_csv": True}
+        x_f = tracks_io.fill_lost(time, x, lost)
+        y_f = tracks_io.fill_lost(time, y, lost)
+    else:
+        fps = fps_opt or DEFAULT_FPS
+        tr = _track_frames(args, fps)
+        time, x_f, y_f, lost = tr["time"], tr["x"], tr["y"], tr["lost"]
+        tracking = _tracking_info(tr, fps)
+    table, summary = analyse_tracks(time, x_f, y_f, l=l, d=d, lost=lost, options=options)
+    summary = {"input": tracking, **summary}
+    theta = table["theta_rad"]
+    beta = table["beta_rad"]
+    tracks_text = tracks_io.format_tracks_csv(time, theta, beta, x_f, y_f, lost)
+    table_text = format_table_csv(table)
+    summary_text = dumps(summary)
+    atomic_write_text(out / "tracks.csv", tracks_text)
+    atomic_write_text(out / "kinematics.csv", table_text)
+    if not args.no_plots:
+        plot_analysis(table, summary, out)
+    atomic_write_text(out / "summary.json", summary_text)
+    if args.json:
+        sys.stdout.write(summary_text)
+    else:
+        print(_describe(summary))
+    return 0
+
+
+def _fmt(v: float | None, spec: str = ".4g") -> str:
+    return "none" if v is None else format(v, spec)
+
+
+def _describe(s: dict) -> str:
+    lines = [f"mu in [{_fmt(s['mu_low'])}, {_fmt(s['mu_high'])}]  ({s['status']})",
+             f"  t_slip_low = {_fmt(s['t_slip_low'], '.4f')} s (last surely stuck), "
+             f"t_slip_high = {_fmt(s['t_slip_high'], '.4f')} s (first surely slipping)"]
+    if s.get("relative_width") is not None:
+        lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
+    ea = s["error_analysis"]
+    lines.append(f"  report's worst case ({100 * ea['e_omega']:g} % on omega, "
+                 f"{100 * ea['e_omega_dot']:g} % on omega_dot): {100 * ea['e_mu_min']:+.1f} % / "
+                 f"{100 * ea['e_mu_max']:+.1f} % -> [{_fmt(ea['mu_low_widened'])}, "
+                 f"{_fmt(ea['mu_high_widened'])}]")
+    mc = s.get("monte_carlo")
+    if mc:
+        for key in ("mu_low", "mu_high"):
+            e = mc[key]
+            if e.get("n_defined"):
+                lines.append(f"  Monte Carlo ({mc['draws']} draws) {key}: 2.5/50/97.5 % = "
+                             f"{e['p2.5']:.4g} / {e['p50']:.4g} / {e['p97.5']:.4g}")
+    n = s["noise"]
+    lines.append(f"  noise: theta {n['sigma_theta_rad']:.2e} rad, beta {n['sigma_beta_rad']:.2e} "
+                 f"rad, omega_dot {n['sigma_omega_dot_rad_s2']:.3g} rad/s^2 (1 sigma); "
+                 f"lost frames {s['lost_frames']['any']}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------ summary of runs
+
+def cmd_measure_summary(args: argparse.Namespace) -> int:
+    """``abu measure-summary SUMMARY.json ... --out DIR``: combine several records' intervals."""
+    from .multi import combine_summaries, plot_histogram, read_intervals
+
+    intervals = read_intervals(args.summaries)
+    result = combine_summaries(intervals, bins=args.bins)
+    out = Path(args.out)
+    text = dumps(result)
+    plot_histogram(result, out / "histogram.png")
+    atomic_write_text(out / "measure_summary.json", text)
+    if args.json:
+        sys.stdout.write(text)
+    else:
+        print(_describe_multi(result))
+    return 0
+
+
+def _describe_multi(r: dict) -> str:
+    lines = [f"{r['n_records']} intervals ({r['n_complete']} with both bounds)"]
+    u = r["union_hull"]
+    lines.append(f"  contained in at least one interval: [{_fmt(u[0])}, {_fmt(u[1])}]")
+    m = r["majority_range"]
+    lines.append(f"  contained in more than half: "
+                 f"{'none' if m is None else '[' + _fmt(m[0]) + ', ' + _fmt(m[1]) + ']'}")
+    c = r["common_range"]
+    lines.append(f"  contained in all: {'none' if c is None else '[' + _fmt(c[0]) + ', ' + _fmt(c[1]) + ']'}")
+    t = r["turnbull"]
+    lines.append(f"  Turnbull NPMLE median in [{_fmt(t['median'][0])}, {_fmt(t['median'][1])}]")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------ render
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """``abu render --out DIR``: render the digital twin of the report's experiment."""
+    from .twin import render_twin, twin_settings_from_args
+    settings = twin_settings_from_args(args)
+    path = render_twin(Path(args.out), settings)
+    _log(args, f"wrote the twin recording to {path}")
+    return 0
+
+
+# ------------------------------------------------------------------------------ parser
+
+def _add_tracking_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--fps", type=float, default=None,
+                   help=f"frame rate [frames/s] (default {DEFAULT_FPS:g}; with --tracks the "
+                        "CSV's time column is used)")
+    p.add_argument("--seeds", default=None,
+                   help="marker positions in frame 0, 'x,y;x,y;x,y' [px] (x = column, y = row) "
+                        "in the order ABU centre; CD marker; ball. Default: found automatically")
+    p.add_argument("--dark-markers", action="store_true",
+                   help="markers are darker than their surroundings")
+    p.add_argument("--method", default="isocontour",
+                   help="centre-finding method: isocontour (default), report, moments")
+    p.add_argument("--window", type=int, default=30, help="tracking window [px] (default 30)")
+    p.add_argument("--progress", action="store_true", help="progress bar while tracking")
+    p.add_argument("--quiet", action="store_true", help="no messages on stderr")
+
+
+def register(subparsers) -> None:
+    """Add ``track``, ``measure``, ``measure-summary`` and ``render`` to ``subparsers``."""
+    p = subparsers.add_parser("track", help="track the three markers of a recording",
+                              description="Track the ABU centre, CD and ball markers through a "
+                                          "recording and write tracks.csv.")
+    p.add_argument("input", help="folder of frames, multi-page TIFF, .npy stack or video")
+    p.add_argument("--out", required=True, help="output folder")
+    _add_tracking_options(p)
+    p.set_defaults(func=cmd_track)
+
+    p = subparsers.add_parser("measure", help="interval on mu from a recording or tracks",
+                              description="Track (or read tracks with --tracks), compute theta, "
+                                          "beta, omega, omega_dot and the interval "
+                                          "[mu_low, mu_high] with its error analysis.")
+    p.add_argument("input", help="recording (see 'abu track'), or with --tracks a CSV with "
+                                 "time,x_center,y_center,x_cd,y_cd,x_ball,y_ball")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--tracks", action="store_true", help="INPUT is a tracks CSV")
+    _add_tracking_options(p)
+    p.add_argument("--l", type=float, default=DEFAULT_L,
+                   help=f"radius of the ball centre's path [m] (default {DEFAULT_L:g})")
+    p.add_argument("--d", type=float, default=DEFAULT_D,
+                   help=f"ball diameter [m] (default {DEFAULT_D:g})")
+    p.add_argument("--estimator", choices=["savgol", "report"], default="savgol",
+                   help="omega / omega_dot estimator (default savgol)")
+    p.add_argument("--sg-window-s", type=float, default=0.02,
+                   help="Savitzky-Golay window [s] (default 0.02)")
+    p.add_argument("--poly-degree", type=int, default=10,
+                   help="degree of the report estimator's polynomial (default 10)")
+    p.add_argument("--trim-s", type=float, default=None,
+                   help="time excluded at each end [s] (default: savgol 0, report 0.05)")
+    p.add_argument("--k-sigma", type=float, default=3.0,
+                   help="error-bar multiple for the bounds and the slip threshold (default 3)")
+    p.add_argument("--lower", choices=["creep", "band"], default="creep",
+                   help="how the last surely-stuck time is found (default creep)")
+    p.add_argument("--no-harmonic", action="store_true",
+                   help="do not remove the lighting harmonic from beta")
+    p.add_argument("--harmonic-phase", choices=["ball", "cd"], default="ball",
+                   help="phase of the harmonic: ball angle (default) or theta")
+    p.add_argument("--mc-draws", type=int, default=50,
+                   help="Monte Carlo draws of tracking noise (default 50; 0 = none)")
+    p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
+    p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
+    p.set_defaults(func=cmd_measure)
+
+    p = subparsers.add_parser("measure-summary", help="combine the intervals of several records",
+                              description="Histogram (report fig. 5.11), union / majority / "
+                                          "common ranges and a Turnbull estimate from several "
+                                          "summary.json files.")
+    p.add_argument("summaries", nargs="+", help="summary.json files of 'abu measure' (or a CSV "
+                                                "with columns mu_low,mu_high)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--bins", type=int, default=100, help="grid points of the histogram")
+    p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.set_defaults(func=cmd_measure_summary)
+
+    p = subparsers.add_parser("render", help="render the digital twin of the experiment",
+                              description="Simulate the report's experiment and render it as a "
+                                          "high-speed camera recording (frames.tif, truth.csv, "
+                                          "meta.json).")
+    p.add_argument("--out", required=True, help="output folder")
+    try:
+        from .twin import add_render_arguments
+    except ImportError:  # the twin is not available: the command explains it when run
+        add_render_arguments = None
+    if add_render_arguments is not None:
+        add_render_arguments(p)
+    p.add_argument("--quiet", action="store_true", help="no messages on stderr")
+    p.set_defaults(func=cmd_render)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """A parser with only the measurement commands (the stand-alone entry point)."""
+    parser = argparse.ArgumentParser(prog="abu", description="ABU friction measurement commands")
+    sub = parser.add_subparsers(dest="command", required=True)
+    register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one measurement command; AbuError -> message on stderr and status 2."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except AbuError as exc:
+        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
