@@ -10,8 +10,8 @@ Image model (grey levels, before noise), at pixel (x, y) = (column, row):
 nearly exact). Markers are opaque disks that receive the same additive lighting as the
 background. With motion blur the coverage is averaged over ``blur_samples`` sub-frame
 positions spread over ``exposure_fraction`` of the frame interval, centred on the frame time.
-Then Gaussian sensor noise (``noise_sigma`` grey levels) is added and the result rounded and
-clipped to 0..255 (8-bit quantisation).
+Gaussian sensor noise (``noise_sigma`` grey levels) is added and the result rounded to the
+nearest integer and clipped to 0..255 (8-bit quantisation).
 
 Asymmetric lighting on the ball (report sec. 5.2): the lit part of the brass ball is displaced
 toward the lamp, so its *apparent* centre is the true centre plus a fixed image-frame offset
@@ -259,39 +259,52 @@ def _subframe_positions(xy: np.ndarray, settings: RenderSettings) -> np.ndarray:
     return spline(tt).reshape(n, s, 2)
 
 
-def _add_disk(canvas: np.ndarray, pad: int, pos: np.ndarray, style: MarkerStyle,
-              contrast: float, supersample: int) -> None:
-    """Add ``contrast`` * area coverage of a disk to each frame of ``canvas`` (in place).
+def _add_disk(img: np.ndarray, pos: np.ndarray, style: MarkerStyle, contrast: float,
+              supersample: int) -> None:
+    """Add ``contrast`` * area coverage of a disk to each frame of ``img`` (in place).
 
-    canvas: (n, H + 2 pad, W + 2 pad) float32; pos: (n, S, 2) sub-frame centres [px].
+    img: (n, H, W) float32; pos: (n, S, 2) sub-frame centres [px] (coverage averaged over S).
     Only a small patch around each disk is computed.
     """
     n, n_sub, _ = pos.shape
+    _, hgt, wid = img.shape
     r = style.radius_px
-    span = np.ptp(pos, axis=1).max() if n_sub > 1 else 0.0
+    span = float(np.ptp(pos, axis=1).max()) if n_sub > 1 else 0.0
     half = int(math.ceil(r + span + 2.0))
     size = 2 * half + 1
     mean = pos.mean(axis=1)
     x0 = np.floor(mean[:, 0]).astype(np.int64) - half  # patch corner [px]
     y0 = np.floor(mean[:, 1]).astype(np.int64) - half
+    visible = (x0 + size > 0) & (y0 + size > 0) & (x0 < wid) & (y0 < hgt)
+    if not visible.any():
+        return
+    idx = np.flatnonzero(visible)
+    x0, y0, pos = x0[idx], y0[idx], pos[idx]
     ss = supersample
     u = ((np.arange(ss) + 0.5) / ss - 0.5).astype(np.float32)          # sample offsets [px]
     grid = (np.arange(size)[:, None] + u[None, :]).ravel().astype(np.float32)  # size*ss
-    cov = np.zeros((n, size, size), dtype=np.float32)
+    cov = np.zeros((idx.size, size, size), dtype=np.float32)
     for s in range(n_sub):
         dx = (x0[:, None] + grid[None, :]) - pos[:, s, 0:1].astype(np.float32)   # (n, size*ss)
         dy = (y0[:, None] + grid[None, :]) - pos[:, s, 1:2].astype(np.float32)
         d = np.sqrt(dy[:, :, None] ** 2 + dx[:, None, :] ** 2)                  # (n, Y, X)
         # each sample is a 1/ss px square: a linear ramp over its width gives its area share
-        c = np.clip((r - d) * ss + 0.5, 0.0, 1.0)
-        cov += c.reshape(n, size, ss, size, ss).mean(axis=(2, 4))
-    cov *= contrast / n_sub
-    rows = (y0[:, None] + pad + np.arange(size))[:, :, None]
-    cols = (x0[:, None] + pad + np.arange(size))[:, None, :]
-    ok = (rows.min(axis=(1, 2)) >= 0) & (rows.max(axis=(1, 2)) < canvas.shape[1]) & \
-         (cols.min(axis=(1, 2)) >= 0) & (cols.max(axis=(1, 2)) < canvas.shape[2])
-    idx = np.flatnonzero(ok)  # disks far outside the frame are not drawn
-    canvas[idx[:, None, None], rows[idx], cols[idx]] += cov[idx]
+        d -= r
+        d *= -ss
+        d += 0.5
+        np.clip(d, 0.0, 1.0, out=d)
+        cov += d.reshape(-1, size, ss, size, ss).sum(axis=(2, 4))
+    cov *= contrast / (n_sub * ss * ss)
+    inside = (x0 >= 0) & (y0 >= 0) & (x0 + size <= wid) & (y0 + size <= hgt)
+    k = np.flatnonzero(inside)
+    if k.size:
+        rows = (y0[k, None] + np.arange(size))[:, :, None]
+        cols = (x0[k, None] + np.arange(size))[:, None, :]
+        img[idx[k, None, None], rows, cols] += cov[k]  # patches of one marker never overlap
+    for k in np.flatnonzero(~inside):  # patches cut by the frame edge (few): clip by slicing
+        ya, xa = max(0, y0[k]), max(0, x0[k])
+        yb, xb = min(hgt, y0[k] + size), min(wid, x0[k] + size)
+        img[idx[k], ya:yb, xa:xb] += cov[k, ya - y0[k]:yb - y0[k], xa - x0[k]:xb - x0[k]]
 
 
 def render_markers(positions: np.ndarray, styles: list[MarkerStyle], settings: RenderSettings,
@@ -316,25 +329,22 @@ def render_markers(positions: np.ndarray, styles: list[MarkerStyle], settings: R
     s = settings
     n = pos.shape[0]
     rng = np.random.default_rng(seed)
-    base = lighting_image(s)
+    base = lighting_image(s) + np.float32(0.5)  # + 0.5: truncation below rounds to nearest
     sub = [_subframe_positions(pos[:, m, :], s) for m in range(len(styles))]
-    max_r = max(st.radius_px for st in styles)
-    spans = [np.ptp(p, axis=1).max() if p.shape[1] > 1 else 0.0 for p in sub]
-    pad = int(math.ceil(max_r + max(spans) + 4.0))
     out = np.empty((n, s.height, s.width), dtype=np.uint8)
     for start in range(0, n, chunk):
         stop = min(n, start + chunk)
-        canvas = np.zeros((stop - start, s.height + 2 * pad, s.width + 2 * pad), dtype=np.float32)
-        for m, st in enumerate(styles):
-            _add_disk(canvas, pad, sub[m][start:stop], st, st.brightness - s.background,
-                      s.supersample)
-        img = canvas[:, pad:pad + s.height, pad:pad + s.width]
-        img += base
+        shape = (stop - start, s.height, s.width)
         if s.noise_sigma > 0:
-            img += s.noise_sigma * rng.standard_normal(img.shape, dtype=np.float32)
-        np.rint(img, out=img)
-        np.clip(img, 0, 255, out=img)
-        out[start:stop] = img
+            img = rng.standard_normal(shape, dtype=np.float32)
+            img *= np.float32(s.noise_sigma)
+            img += base
+        else:
+            img = np.broadcast_to(base, shape).copy()
+        for m, st in enumerate(styles):
+            _add_disk(img, sub[m][start:stop], st, st.brightness - s.background, s.supersample)
+        np.clip(img, 0.0, 255.0, out=img)
+        out[start:stop] = img  # float -> uint8 truncates: with the + 0.5 above, rounds
     return out
 
 

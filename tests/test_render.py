@@ -158,3 +158,106 @@ def test_bad_settings_and_inputs():
         render_markers(np.full((2, 1, 2), np.nan), [MarkerStyle(3.0, 100.0)], RenderSettings())
     with pytest.raises(ParameterError, match="pixel_size"):
         CameraGeometry(pixel_size=0.0)
+
+
+# --- digital twin ---------------------------------------------------------------------------
+
+
+def test_sample_at_frames_takes_rows_and_interpolates_between():
+    """Rows on frame times are taken as they are (right limits at jumps); between rows the
+    cubic Hermite interpolant reproduces a cubic theta(t) exactly."""
+    from measurement.twin import sample_at_frames
+
+    t = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4])
+    side = np.array([0, 0, -1, 1, 0, 0])
+
+    def theta(x):
+        return 1.0 - 2.0 * x + 3.0 * x ** 2 - 4.0 * x ** 3
+
+    def omega(x):
+        return -2.0 + 6.0 * x - 12.0 * x ** 2
+
+    table = {"time": t, "side": side, "theta": theta(t), "omega": omega(t),
+             "alpha": 6.0 - 24.0 * t, "beta": 0.5 * t, "beta_dot": np.full(6, 0.5),
+             "mu_req": t / 10, "mode": np.array([0, 0, 0, 1, 1, 1]),
+             "omega_ref": np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])}
+    times = np.array([0.0, 0.05, 0.2, 0.27, 0.4])
+    st = sample_at_frames(table, times)
+    np.testing.assert_allclose(st["theta"], theta(times), atol=1e-12)
+    np.testing.assert_allclose(st["beta"], 0.5 * times, atol=1e-12)
+    np.testing.assert_array_equal(st["mode"], [0, 0, 1, 1, 1])       # right limit at 0.2
+    np.testing.assert_array_equal(st["omega_ref"], [1, 1, 2, 2, 2])
+    with pytest.raises(Exception, match="covers"):
+        sample_at_frames(table, np.array([0.0, 0.5]))
+
+
+def test_twin_drive_reproduces_the_reports_recordings(fmu_dir):
+    """Default twin (report sec. 5.3, mu = 0.03): stick first, slip inside the report's window
+    t_slip in [0.10, 0.33] s, omega on the staircase, acceleration of the order the report's
+    bounds imply; the identified loop (zeta 0.5, omega_n 2.2 rad/s) cannot do that."""
+    from controller.reference import Staircase
+    from measurement.twin import DriveSettings, TwinSettings, simulate_twin
+
+    s = TwinSettings()
+    state, (centre, cd, ball), _ = simulate_twin(s, fmu_dir=fmu_dir)
+    t = s.frame_times
+    mode = state["mode"]
+    assert np.all(mode[t < 0.12] == 0)                       # the first steps: stick
+    slip = t[np.flatnonzero(mode != 0)[0]]
+    assert 0.10 <= slip <= 0.33
+    assert np.ptp(state["beta"]) > 0.05                       # a visible slip [rad]
+    ref = Staircase(s.omega0, s.omega_end, s.t0, s.te, s.drive.step, s.drive.rounding)
+    assert np.max(np.abs(state["omega"] - ref.values(t))) < 2.5 * 2 * np.pi
+    # report: mu_1 = 0.0286 at t1 = 0.160 s, mu_2 = 0.0312 at t2 = 0.245 s, with
+    # |omega_dot| = mu l omega^2 / (l - d/5) on the staircase's omega
+    lever = s.ball.lever_ratio
+    a1 = 0.0286 * ref.value(0.160) ** 2 / lever
+    a2 = 0.0312 * ref.value(0.245) ** 2 / lever
+    peak = np.max(np.abs(state["alpha"][(t > 0.1) & (t < 0.35)]))
+    assert 0.8 * a1 <= peak <= 1.6 * a2
+    # the geometry of the rendered markers follows theta and beta
+    th, be = angles_from_pixels(centre, cd, ball)
+    np.testing.assert_allclose(th, state["theta"], atol=1e-9)
+    np.testing.assert_allclose(be, state["beta"], atol=1e-9)
+    # the identified loop lags the staircase by several Hz and never makes the ball slip
+    slow, _, _ = simulate_twin(s.with_(drive=DriveSettings(zeta=0.5, omega_n=2.2, tau_motor=0.0)),
+                               fmu_dir=fmu_dir)
+    assert np.all(slow["mode"] == 0)
+    assert np.max(np.abs(slow["omega"] - ref.values(t))) > 4.0 * 2 * np.pi
+
+
+def test_render_twin_writes_a_trackable_recording(fmu_dir, tmp_path):
+    import json
+
+    from measurement.frames_io import read_recording
+    from measurement.markers import parse_seeds
+    from measurement.twin import TRUTH_COLUMNS, TwinSettings, render_twin
+
+    s = TwinSettings(n_frames=300, record_start=0.19)  # around the slip at ~0.20 s
+    out = render_twin(tmp_path / "twin", s, fmu_dir=fmu_dir)
+    assert sorted(f.name for f in out.iterdir()) == ["frames.tif", "meta.json", "truth.csv"]
+    rec = read_recording(out / "frames.tif")
+    assert rec.shape == (300, 256, 256)
+    header = (out / "truth.csv").read_text().splitlines()[0].split(",")
+    assert tuple(header) == TRUTH_COLUMNS
+    truth = np.genfromtxt(out / "truth.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(truth["time_s"], 0.19 + np.arange(300) / 4500.0, atol=1e-12)
+    assert set(np.unique(truth["mode"])) == {0.0, 1.0}      # stick, then slip
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["fps"] == 4500.0 and meta["mu"] == 0.03 and meta["seed"] == 0
+    assert meta["drive"] == {**meta["drive"], "zeta": 0.7, "omega_n_rad_s": 12.0,
+                             "tau_motor_s": 0.02}
+    assert meta["geometry"]["l_m"] == 1.15e-2 and meta["geometry"]["pixel_size_m_per_px"] > 0
+    assert meta["render"]["exposure_fraction"] == 0.25
+    tracks = track_recording(rec.frames, parse_seeds(meta["seeds"]))
+    assert not tracks.lost.any()
+    for m, (cx, cy) in enumerate([("centre_x_px", "centre_y_px"), ("cd_x_px", "cd_y_px"),
+                                  ("ball_apparent_x_px", "ball_apparent_y_px")]):
+        e = np.hypot(tracks.x[:, m] - truth[cx], tracks.y[:, m] - truth[cy])
+        assert np.sqrt(np.mean(e ** 2)) < 0.02, m
+    th, be = angles_from_pixels(tracks.xy(0), tracks.xy(1), tracks.xy(2))
+    l_px = meta["geometry"]["l_px"]
+    # beta carries the lighting harmonic (ball_shift_px / l_px) plus tracking noise
+    assert np.max(np.abs(be - truth["beta_rad"])) < (0.5 + 0.06) / l_px
+    k = np.round((th[0] - truth["theta_rad"][0]) / (2 * np.pi))
+    assert np.max(np.abs(th - 2 * np.pi * k - truth["theta_rad"])) < 0.06 / meta["geometry"]["r_cd_px"]
