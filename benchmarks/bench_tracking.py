@@ -1,0 +1,152 @@
+"""Tracking speed on one core: frames per second against the camera (4500 frames/s) and against
+a plain OpenCV moments tracker measured in the same run; reading a recording timed apart.
+
+    python3 benchmarks/bench_tracking.py [--frames 3072] [--repeats 3] [--folder]
+
+The recording is rendered by measurement.render (3072 frames of 256x256 px, three markers, the
+report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the
+true centres is printed too. One core: the process is pinned to one CPU and every thread pool
+(OpenCV, OpenBLAS, OpenMP) is set to one thread.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"  # before NumPy loads its BLAS
+
+import argparse  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from measurement.frames_io import (read_recording, write_frame_folder,  # noqa: E402
+                                   write_multipage_tiff, write_npy)
+from measurement.render import CameraGeometry, RenderSettings, render_frames  # noqa: E402
+from measurement.tracking import METHODS, track_recording  # noqa: E402
+
+CAMERA_FPS = 4500.0
+
+
+def pin_one_core() -> str:
+    cv2.setNumThreads(1)
+    if hasattr(os, "sched_setaffinity"):
+        cpu = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpu})
+        return f"pinned to CPU {cpu}"
+    return "not pinned (no sched_setaffinity)"
+
+
+def staircase_motion(n: int, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """theta, beta [rad]: the inclined sine from -9 Hz to -19 Hz in 0.5 s, then the ball slips."""
+    t = np.arange(n) / fps
+    w0, we, te = -9 * 2 * np.pi, -19 * 2 * np.pi, 0.5
+    s = np.clip(t / te, 0.0, 1.0)
+    theta = w0 * t + (we - w0) * te * (s ** 2 / 2 + (np.cos(2 * np.pi * s) - 1) / (4 * np.pi ** 2))
+    late = t > te
+    theta[late] = w0 * te + (we - w0) * te / 2 + we * (t[late] - te)
+    beta = 1.0 + 0.25 * np.clip((t - 0.2) / 0.17, 0.0, 1.0) ** 2
+    return theta, beta
+
+
+def plain_moments_tracker(frames: np.ndarray, seeds: np.ndarray, window: int = 30) -> np.ndarray:
+    """The baseline: window at the previous position, centroid of (I - mid-level)+ by cv2.moments."""
+    n = frames.shape[0]
+    half = window // 2
+    out = np.empty((n, len(seeds), 2))
+    pos = [list(map(float, s)) for s in seeds]
+    for k in range(n):
+        frame = frames[k]
+        for m, p in enumerate(pos):
+            x0 = int(round(p[0])) - half
+            y0 = int(round(p[1])) - half
+            win = frame[y0:y0 + window, x0:x0 + window]
+            lo, hi, _, _ = cv2.minMaxLoc(win)
+            mom = cv2.moments(cv2.subtract(win, (lo + hi) * 0.5))
+            p[0] = x0 + mom["m10"] / mom["m00"]
+            p[1] = y0 + mom["m01"] / mom["m00"]
+            out[k, m] = p
+    return out
+
+
+def best_time(fn, repeats: int) -> tuple[float, object]:
+    best, result = float("inf"), None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t)
+    return best, result
+
+
+def rms_error(x: np.ndarray, y: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Per-marker RMS of the Euclidean centre error [px] over the frames where found."""
+    e2 = (x - truth[:, :, 0]) ** 2 + (y - truth[:, :, 1]) ** 2
+    return np.sqrt(np.nanmean(e2, axis=0))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=3072)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--folder", action="store_true",
+                    help="also time reading the recording as a folder of PNG files")
+    args = ap.parse_args()
+    where = pin_one_core()
+    n = args.frames
+
+    theta, beta = staircase_motion(n, CAMERA_FPS)
+    settings = RenderSettings(noise_sigma=3.0, exposure_fraction=0.25)
+    c, p, b = CameraGeometry().marker_positions(theta, beta)
+    t = time.perf_counter()
+    frames = render_frames(c, p, b, settings, seed=1)
+    t_render = time.perf_counter() - t
+    truth = np.stack([c, p, b + settings.ball_shift_vector], axis=1)
+    seeds = truth[0]
+    print(f"{n} frames of 256x256 px, 3 markers (radii 6, 4.5, 5 px; noise 3 grey levels; "
+          f"blur 0.25 frame), one core ({where})")
+    print(f"render (synthetic camera, motion blur 5 sub-frames): {t_render:.2f} s "
+          f"= {n / t_render:.0f} frames/s")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tif = write_multipage_tiff(Path(tmp) / "rec.tif", frames)
+        npy = write_npy(Path(tmp) / "rec.npy", frames)
+        t_tif, _ = best_time(lambda: np.asarray(read_recording(tif).frames).sum(), args.repeats)
+        t_npy, _ = best_time(lambda: np.asarray(read_recording(npy).frames).sum(), args.repeats)
+        print(f"read multi-page TIFF (all pixels touched): {t_tif:.3f} s "
+              f"= {n / t_tif:.0f} frames/s")
+        print(f"read .npy stack (memory-mapped, all pixels touched): {t_npy:.3f} s "
+              f"= {n / t_npy:.0f} frames/s")
+        if args.folder:
+            folder = write_frame_folder(Path(tmp) / "png", frames)
+            t_dir, _ = best_time(lambda: read_recording(folder).frames.sum(), 1)
+            print(f"read folder of {n} PNG files: {t_dir:.3f} s = {n / t_dir:.0f} frames/s")
+
+    # warm up imports and caches outside the timings
+    track_recording(frames[:64], seeds)
+    plain_moments_tracker(frames[:64], seeds)
+
+    t_base, base = best_time(lambda: plain_moments_tracker(frames, seeds), args.repeats)
+    base_rms = rms_error(base[:, :, 0], base[:, :, 1], truth)
+    print(f"\nbaseline, plain cv2.moments tracker: {t_base:.3f} s = {n / t_base:.0f} frames/s "
+          f"= {n / t_base / CAMERA_FPS:.2f} x camera; RMS error "
+          f"{np.array2string(base_rms, precision=4)} px (centre, CD, ball)")
+    print(f"{'method':<12} {'time [s]':>9} {'frames/s':>9} {'x camera':>9} {'x baseline':>11}"
+          f"  RMS error [px] centre, CD, ball   lost")
+    for method in METHODS:
+        t_m, tracks = best_time(lambda: track_recording(frames, seeds, method=method),
+                                args.repeats)
+        err = rms_error(tracks.x, tracks.y, truth)
+        fps = n / t_m
+        label = method + (" *" if method == "isocontour" else "")
+        print(f"{label:<12} {t_m:9.3f} {fps:9.0f} {fps / CAMERA_FPS:9.2f} "
+              f"{t_base / t_m:11.2f}  {np.array2string(err, precision=4):<30} "
+              f"{int(tracks.lost.sum())}")
+    print("* default method. 'x camera' > 1: faster than the camera records; 'x baseline': "
+          "speed relative to the plain cv2.moments tracker (which has no lost-marker tests).")
+
+
+if __name__ == "__main__":
+    main()
