@@ -13,7 +13,7 @@ the high-speed camera recording (:func:`render.render_frames`). It writes, atomi
   the true mu, the simulated slip instant and bounds, and every drive and render setting.
 
 The drive (why not the identified zeta = 0.5, omega_n = 2.2 rad/s): that loop needs about a
-second to follow a 1 Hz step, so it lags the 0.5 s staircase by up to 6 Hz, its acceleration
+second to follow a 1 Hz step, so it lags the 0.5 s staircase by up to 6.9 Hz, its acceleration
 never exceeds 130 rad/s^2 and with mu = 0.03 the ball never slips -- unlike the report's
 recordings, whose bounds mu_1 = 0.0286 (t = 0.160 s) and mu_2 = 0.0312 (t = 0.245 s) imply
 |omega_dot| of 140-250 rad/s^2 and omega on the staircase. The default drive, zeta = 0.7,
