@@ -203,6 +203,19 @@ def test_find_markers_roles(theta, beta):
     np.testing.assert_allclose(seeds_geo, truth, atol=0.05)
 
 
+def test_find_markers_dark():
+    geo = CameraGeometry()
+    c, p, b = geo.marker_positions([0.3], [1.0])
+    settings = RenderSettings(background=180.0, centre=MarkerStyle(6.0, 40.0),
+                              cd=MarkerStyle(4.5, 50.0), ball=MarkerStyle(5.0, 30.0),
+                              ball_shift_px=0.0)
+    frame = render_frames(c, p, b, settings, seed=1)[0]
+    seeds, _ = find_markers(frame, dark=True)
+    np.testing.assert_allclose(seeds, np.stack([c[0], p[0], b[0]]), atol=0.05)
+    with pytest.raises(MarkerError, match="found 0 marker candidates"):
+        find_markers(frame)  # dark markers are not bright spots
+
+
 def test_find_markers_ambiguous_asks_for_seeds():
     frame, truth, _ = rendered_first_frame()
     extra = render_markers(np.array([[truth[0] + [-45.0, 60.0]]]), [MarkerStyle(5.0, 200.0)],
