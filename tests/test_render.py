@@ -166,7 +166,7 @@ def test_bad_settings_and_inputs():
 def test_sample_at_frames_takes_rows_and_interpolates_between():
     """Rows on frame times are taken as they are (right limits at jumps); between rows the
     cubic Hermite interpolant reproduces a cubic theta(t) exactly."""
-    from measurement.twin import sample_at_frames
+    from measurement.twin import TwinError, sample_at_frames
 
     t = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4])
     side = np.array([0, 0, -1, 1, 0, 0])
@@ -187,7 +187,7 @@ def test_sample_at_frames_takes_rows_and_interpolates_between():
     np.testing.assert_allclose(st["beta"], 0.5 * times, atol=1e-12)
     np.testing.assert_array_equal(st["mode"], [0, 0, 1, 1, 1])       # right limit at 0.2
     np.testing.assert_array_equal(st["omega_ref"], [1, 1, 2, 2, 2])
-    with pytest.raises(Exception, match="covers"):
+    with pytest.raises(TwinError, match=r"covers \[0, 0.4\] s"):
         sample_at_frames(table, np.array([0.0, 0.5]))
 
 
