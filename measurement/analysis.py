@@ -126,7 +126,8 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
                                             direction=direction)
     iv = interval_mod.slip_interval(time, kin.omega, kin.omega_dot, kin.sigma_omega,
                                     kin.sigma_omega_dot, trusted, harm.beta_clean, harm.residual,
-                                    l=l, d=d, options=opt.interval, direction=direction)
+                                    l=l, d=d, options=opt.interval, direction=direction,
+                                    bias_omega_dot=kin.bias_omega_dot)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv}
 
 
@@ -203,6 +204,7 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
         "harmonic_rad": harm.harmonic, "slip_deviation_rad": iv.deviation,
         "omega_rad_s": kin.omega, "sigma_omega_rad_s": kin.sigma_omega,
         "omega_dot_rad_s2": kin.omega_dot, "sigma_omega_dot_rad_s2": kin.sigma_omega_dot,
+        "bias_omega_dot_rad_s2": kin.bias_omega_dot,
         "mu_req": iv.mu_req, "mu_req_lo": iv.mu_req_lo, "mu_req_hi": iv.mu_req_hi,
         "running_max_lo": iv.running_max_lo, "running_max_hi": iv.running_max_hi,
         "trusted": kin.trusted.astype(int), "lost": tracks_io.lost_bitmask(lost),
@@ -262,6 +264,7 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
             "sigma_beta_rad": iv.details["sigma_beta_rad"],
             "sigma_omega_rad_s": float(np.median(kin.sigma_omega[kin.trusted])),
             "sigma_omega_dot_rad_s2": float(np.median(kin.sigma_omega_dot[kin.trusted])),
+            "bias_omega_dot_max_rad_s2": float(np.max(kin.bias_omega_dot[kin.trusted])),
             "harmonic_amplitude_max_rad": float(np.max(harm.amplitude)) if opt.harmonic else 0.0,
             "beta_fit_residual_rad": harm.residual_sigma,
         },

@@ -11,9 +11,10 @@ mu >= M(t_a); if it surely slips at t_b, the slip started at some t_s <= t_b wit
 <= M(t_b). So mu is in [M(t_a), M(t_b)].
 
 Error bars, conservatively. mu_req is computed twice more with the noise error bars of omega and
-omega_dot pushed k_sigma standard deviations in the unfavourable direction:
-mu_req_lo = (l - d/5) max(|omega_dot| - k s_a, 0) / (l (|omega| + k s_w)^2) and
-mu_req_hi = (l - d/5) (|omega_dot| + k s_a) / (l (|omega| - k s_w)^2). The lower bound uses
+omega_dot pushed k_sigma standard deviations in the unfavourable direction, plus the estimator's
+truncation-error bound b_a where the data show one:
+mu_req_lo = (l - d/5) max(|omega_dot| - k s_a - b_a, 0) / (l (|omega| + k s_w)^2) and
+mu_req_hi = (l - d/5) (|omega_dot| + k s_a + b_a) / (l (|omega| - k s_w)^2). The lower bound uses
 M_lo (running max of mu_req_lo), the upper bound M_hi.
 
 Slip detection on beta (harmonic already removed). d(t) = direction * (beta(t) - b0), with b0 the
@@ -131,12 +132,13 @@ def mu_required(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float) ->
 
 def mu_required_bands(omega: np.ndarray, omega_dot: np.ndarray, sigma_omega: np.ndarray,
                       sigma_omega_dot: np.ndarray, l: float, d: float,
-                      k: float) -> tuple[np.ndarray, np.ndarray]:
-    """(mu_req_lo, mu_req_hi): mu_req with the error bars pushed k sigma down and up."""
+                      k: float, bias_omega_dot: np.ndarray | float = 0.0
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(mu_req_lo, mu_req_hi): mu_req with the error bars pushed k sigma (+ bias) down and up."""
     w = np.abs(np.asarray(omega, dtype=float))
     a = np.abs(np.asarray(omega_dot, dtype=float))
-    a_lo = np.maximum(a - k * sigma_omega_dot, 0.0)
-    a_hi = a + k * sigma_omega_dot
+    a_lo = np.maximum(a - k * sigma_omega_dot - bias_omega_dot, 0.0)
+    a_hi = a + k * sigma_omega_dot + bias_omega_dot
     w_hi = w + k * sigma_omega
     w_lo = np.maximum(w - k * sigma_omega, 1e-12)
     ratio = (l - d / 5.0) / l
@@ -220,7 +222,8 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
                   sigma_omega: np.ndarray, sigma_omega_dot: np.ndarray, trusted: np.ndarray,
                   beta_clean: np.ndarray, beta_residual: np.ndarray, *, l: float, d: float,
                   options: IntervalOptions = IntervalOptions(),
-                  direction: int | None = None) -> SlipInterval:
+                  direction: int | None = None,
+                  bias_omega_dot: np.ndarray | None = None) -> SlipInterval:
     """[mu_low, mu_high] from the kinematics and the harmonic-free beta (module docstring).
 
     Args:
@@ -233,6 +236,8 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
         l, d: ball path radius and diameter [m].
         options: :class:`IntervalOptions`.
         direction: +1 / -1 the direction beta moves in slip; default -sign(median omega_dot).
+        bias_omega_dot: bound on the estimator's truncation error of omega_dot [rad/s^2],
+            added to k sigma (default none).
     """
     t = np.asarray(time, dtype=float)
     n = t.size
@@ -247,7 +252,9 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
     k = float(options.k_sigma)
 
     mu_req = mu_required(omega, omega_dot, l, d)
-    mu_lo, mu_hi = mu_required_bands(omega, omega_dot, sigma_omega, sigma_omega_dot, l, d, k)
+    bias = np.zeros(n) if bias_omega_dot is None else np.asarray(bias_omega_dot, dtype=float)
+    mu_lo, mu_hi = mu_required_bands(omega, omega_dot, sigma_omega, sigma_omega_dot, l, d, k,
+                                     bias)
     for arr in (mu_req, mu_lo, mu_hi):
         arr[~trusted] = np.nan
     m_req = running_max(mu_req, trusted)
@@ -307,8 +314,9 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
             if ta_i is not None and ta_i < i0:
                 ta_i = None
     else:
-        mu_creep, k_c = _creep_lower_bound(t, omega, omega_dot, sigma_omega, sigma_omega_dot,
-                                           mu_lo, m_lo, dev_s, sigma_dev, l, d, direction,
+        mu_creep, k_c = _creep_lower_bound(t, omega, omega_dot, sigma_omega,
+                                           k * np.asarray(sigma_omega_dot) + bias, mu_lo, m_lo,
+                                           dev_s, sigma_dev, l, d, direction,
                                            i0, i1, window, options)
         details["creep_threshold_sigma"] = k_c
         below = np.flatnonzero(m_lo[i0: end + 1] <= mu_creep) if mu_creep is not None else []
@@ -325,13 +333,16 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
         direction=direction, beta_stick=b0, details=details)
 
 
-def _creep_lower_bound(t, omega, omega_dot, sigma_omega, sigma_omega_dot, mu_lo, m_lo, dev_s,
+def _creep_lower_bound(t, omega, omega_dot, sigma_omega, band_omega_dot, mu_lo, m_lo, dev_s,
                        sigma_dev, l, d, direction, i0, i1, window,
                        options: IntervalOptions) -> tuple[float | None, float]:
-    """Smallest candidate mu whose predicted (least) creep the data do not contradict."""
+    """Smallest candidate mu whose predicted (least) creep the data do not contradict.
+
+    ``band_omega_dot`` is the full half-width of omega_dot's band (k sigma + bias) [rad/s^2].
+    """
     k = options.k_sigma
     # Least motion: acceleration shrunk, speed (normal force) enlarged by their error bars.
-    a_mag = np.maximum(np.abs(omega_dot) - k * sigma_omega_dot, 0.0)
+    a_mag = np.maximum(np.abs(omega_dot) - band_omega_dot, 0.0)
     omega_c = np.sign(omega) * (np.abs(omega) + k * sigma_omega)
     omega_dot_c = np.sign(omega_dot) * a_mag
     n_blocks = max(1.0, (i1 - i0 + 1) / window)

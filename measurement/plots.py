@@ -83,8 +83,9 @@ def plot_analysis(table: dict, summary: dict, out_dir: str | os.PathLike) -> lis
     fig, ax = plt.subplots(figsize=(7, 4))
     a = np.abs(table["omega_dot_rad_s2"])
     s = np.asarray(table["sigma_omega_dot_rad_s2"])
-    ax.fill_between(t, a - k * s, a + k * s, color="C0", alpha=0.25,
-                    label=f"+-{k:g} sigma noise band")
+    b = np.asarray(table.get("bias_omega_dot_rad_s2", np.zeros_like(s)))
+    ax.fill_between(t, a - k * s - b, a + k * s + b, color="C0", alpha=0.25,
+                    label=f"+-({k:g} sigma noise + estimator bias) band")
     ax.plot(t, a, color="C0", linewidth=0.8, label="|omega_dot|")
     _shade_untrusted(ax, t, trusted)
     _mark_times(ax, summary)
