@@ -137,6 +137,28 @@ def test_report_polynomial_smears_an_acceleration_step_savgol_does_not():
     assert np.abs(sg.omega_dot[after] + 80.0).max() < 10.0
 
 
+def test_savgol_truncation_bound_covers_its_error_at_a_motor_lag_kink():
+    # omega_dot constant, then rising through a 20 ms first-order lag (a setpoint step seen
+    # through a current loop): a kink the 20 ms window smooths by several rad/s^2.
+    ts, a0, amp, tau, w0 = 0.3, -100.0, 150.0, 0.02, -56.0
+    u = np.maximum(T - ts, 0.0)
+    alpha = a0 - amp * (1 - np.exp(-u / tau))
+    w_s, th_s = w0 + a0 * ts, w0 * ts + a0 * ts**2 / 2
+    theta = np.where(T < ts, w0 * T + a0 * T**2 / 2,
+                     th_s + w_s * u + a0 * u**2 / 2
+                     - amp * (u**2 / 2 - tau * u + tau**2 * (1 - np.exp(-u / tau))))
+    for noise in (0.0, 1e-6):
+        k = savgol_kinematics(T, theta + noise * np.random.default_rng(0).standard_normal(N))
+        m = k.trusted
+        err = np.abs(k.omega_dot - alpha)[m]
+        assert err.max() > 5.0                           # the estimator's own error is real
+        bar = k.bias_omega_dot[m] + 3 * k.sigma_omega_dot[m]
+        assert np.max(err - bar) < 0.002 * np.abs(alpha).max()
+    # Where the data are noisy the bound vanishes and the noise bar stays as it was.
+    k = savgol_kinematics(T, theta + 5e-4 * np.random.default_rng(1).standard_normal(N))
+    assert np.mean(k.bias_omega_dot[k.trusted] > 0) < 0.05
+
+
 def test_savgol_parameter_errors():
     theta, _, _ = smooth_motion()
     with pytest.raises(ParameterError, match="polyorder"):
