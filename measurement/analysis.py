@@ -15,7 +15,7 @@ It returns a table of time series (column names carry their units) and a JSON-re
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np

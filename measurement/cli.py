@@ -273,7 +273,8 @@ def _describe_multi(r: dict) -> str:
     lines.append(f"  contained in more than half: "
                  f"{'none' if m is None else '[' + _fmt(m[0]) + ', ' + _fmt(m[1]) + ']'}")
     c = r["common_range"]
-    lines.append(f"  contained in all: {'none' if c is None else '[' + _fmt(c[0]) + ', ' + _fmt(c[1]) + ']'}")
+    lines.append("  contained in all: "
+                 + ("none" if c is None else f"[{_fmt(c[0])}, {_fmt(c[1])}]"))
     t = r["turnbull"]
     lines.append(f"  Turnbull NPMLE median in [{_fmt(t['median'][0])}, {_fmt(t['median'][1])}]")
     return "\n".join(lines)

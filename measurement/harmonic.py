@@ -13,9 +13,10 @@ the alternative), A_k, B_k slowly varying amplitudes (Legendre polynomials of de
 a monotone piecewise-quadratic C1 spline: the integral of non-negative hat functions (linear
 B-splines) on knots every ``knot_spacing_s``; it is monotone if and only if its coefficients are
 >= 0 (an I-spline basis). All coefficients are found together by bounded linear least squares
-(the free coefficients are projected out, the rest is ``scipy.optimize.nnls``). The monotone constraint is what keeps the harmonic identifiable
-although the knots are much closer than its period: a monotone curve cannot oscillate, so it cannot
-absorb the harmonic, which unconstrained splines of that flexibility would.
+(the free coefficients are projected out, the rest is ``scipy.optimize.nnls``). The monotone
+constraint is what keeps the harmonic identifiable although the knots are much closer than its
+period: a monotone curve cannot oscillate, so it cannot absorb the harmonic, which
+unconstrained splines of that flexibility would.
 
 The amplitudes are constant by default (``amp_degree=0``), as the report observed and as a lamp
 fixed in the world implies. Higher degrees are possible but weakly identified: while the ball slips
@@ -119,7 +120,8 @@ def _partly_nonnegative_lstsq(design: np.ndarray, target: np.ndarray,
     """min ||design x - target|| with x[nonneg] >= 0 and the other coefficients free.
 
     The free columns are projected out (QR), the constrained problem is reduced to its
-    triangular (Cholesky) factor and solved by Lawson-Hanson NNLS; then the free coefficients follow.
+    triangular (Cholesky) factor and solved by Lawson-Hanson NNLS; then the free coefficients
+    follow.
     """
     idx = np.arange(design.shape[1])
     cons = idx[nonneg]

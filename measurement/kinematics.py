@@ -146,7 +146,8 @@ def savgol_kinematics(time: np.ndarray, theta: np.ndarray, *, window_s: float = 
     # motion is smooth (bias(w) = 4/3 (a_w - a_{w/2})) and linearly at a kink of omega_dot, e.g.
     # a setpoint step through a motor lag (bias(w) = 2 (a_w - a_{w/2}) for the same shape; the
     # error profiles of the two windows are not aligned in time, and 3 is what bounds the error
-    # of a kink in tests); we take 3 times the largest difference within a quarter window. It is kept only where the difference exceeds three times its own noise, so noisy
+    # of a kink in tests); we take 3 times the largest difference within a quarter window.
+    # It is kept only where the difference exceeds three times its own noise, so noisy
     # records keep their noise bars and noise-free ones get an honest bar.
     half_window = _odd_window(0.5 * window * dt, dt, polyorder + 3 if polyorder % 2 == 0
                               else polyorder + 2)

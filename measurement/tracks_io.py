@@ -47,8 +47,8 @@ MARKERS = ("center", "cd", "ball")
 MIN_ROWS = 20
 
 UNITS_LINE = ("# units: time [s]; theta, beta [rad]; x_*, y_* [px] (x = column, y = row, y points "
-              "down); lost: bit mask of markers lost by the tracker (1 = center, 2 = cd, 4 = ball), "
-              "their coordinates interpolated in time")
+              "down); lost: bit mask of markers lost by the tracker (1 = center, 2 = cd, "
+              "4 = ball), their coordinates interpolated in time")
 
 
 class TracksFileError(AbuError, ValueError):
@@ -216,9 +216,9 @@ def fill_lost(time: np.ndarray, values: np.ndarray, lost: np.ndarray, *,
         if flags[0] or flags[-1]:
             k = 0 if flags[0] else len(starts) - 1
             edge = "first" if flags[0] else "last"
-            raise LostMarkerError(f"marker '{name}' lost in frames {starts[k]}-{ends[k]} (up to the "
-                                  f"{edge} frame, {n} frames in all): cannot interpolate; re-track "
-                                  "with other seeds or another method")
+            raise LostMarkerError(f"marker '{name}' lost in frames {starts[k]}-{ends[k]} (up to "
+                                  f"the {edge} frame, {n} frames in all): cannot interpolate; "
+                                  "re-track with other seeds or another method")
         longest = int(np.argmax(ends - starts))
         if ends[longest] - starts[longest] + 1 > max_gap:
             raise LostMarkerError(
