@@ -1,0 +1,310 @@
+"""The ``abu`` command line.
+
+Subcommands: ``build-fmus``, ``simulate``, ``table41``, ``demo`` (here) and the measurement
+commands ``track``, ``measure``, ``measure-summary``, ``render`` (:mod:`measurement.cli`).
+
+Speeds are given in Hz on the command line (options ending ``-hz``) and converted to rad/s at
+once; everything else is SI. A user error (:class:`abu_model.errors.AbuError`) prints one line
+naming the option on stderr and exits with status 2, without a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+from abu_model.errors import AbuError, ParameterError
+from abu_model.params import BallParams, DEFAULT_J_ABU, PlantParams
+
+HZ = 2.0 * math.pi
+
+#: Library parameter name -> command-line option (for error messages).
+OPTION_OF = {"te": "--te", "t0": "--t0", "t_end": "--t-end", "comm_step": "--comm-step",
+             "zeta": "--zeta", "omega_n": "--omega-n", "mu": "--mu", "mu_d": "--mu-d",
+             "m": "--m", "d": "--d", "l": "--l", "J_abu": "--j-abu", "tau_motor": "--tau-motor",
+             "beta0": "--beta0", "jerk": "--jerk", "rounding": "--rounding",
+             "theta_ref_mode": "--theta-ref", "t_step": "--t-step", "step_hz": "--step-hz"}
+
+REPORT_BOUNDS = {"mu_low": 2.63e-3, "mu_high": 4.14e-3}  # report eq. 4.9 (thesis reading)
+
+
+def _finite(option: str, value: float) -> float:
+    if not math.isfinite(value):
+        raise ParameterError(option, value, "a finite number")
+    return value
+
+
+def _plant(args: argparse.Namespace) -> PlantParams:
+    ball = BallParams(m=args.m, d=args.d, l=args.l, mu=args.mu, mu_d=args.mu_d)
+    return PlantParams(ball, J_abu=args.j_abu, tau_motor=args.tau_motor,
+                       ball_reaction=args.ball_reaction)
+
+
+def _renamed(exc: ParameterError) -> ParameterError:
+    """The same error naming the command-line option."""
+    option = OPTION_OF.get(exc.parameter)
+    return exc if option is None else ParameterError(option, exc.value, exc.expected)
+
+
+def _add_plant_options(p: argparse.ArgumentParser) -> None:
+    b = BallParams()
+    g = p.add_argument_group("plant (SI units)")
+    g.add_argument("--mu", type=float, default=b.mu, help=f"static friction coefficient [-] (default {b.mu:g})")
+    g.add_argument("--mu-d", type=float, default=None, help="sliding friction coefficient [-] (default: mu)")
+    g.add_argument("--m", type=float, default=b.m, help=f"ball mass [kg] (default {b.m:g})")
+    g.add_argument("--d", type=float, default=b.d, help=f"ball diameter [m] (default {b.d:g})")
+    g.add_argument("--l", type=float, default=b.l, help=f"radius of the ball centre's path [m] (default {b.l:g})")
+    g.add_argument("--j-abu", type=float, default=DEFAULT_J_ABU, help=f"rotor inertia [kg m^2] (default {DEFAULT_J_ABU:g})")
+    g.add_argument("--tau-motor", type=float, default=0.0, help="motor torque lag time constant [s] (default 0: none)")
+    g.add_argument("--ball-reaction", action="store_true", help="let the ball's reaction act on the rotor")
+    g.add_argument("--beta0", type=float, default=0.0, help="initial ball angle relative to the ABU [rad]")
+
+
+def _add_controller_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("speed controller")
+    g.add_argument("--theta-ref", choices=["integral", "thesis"], default="integral",
+                   help="theta_ref reading: integral of the setpoint (default) or the report's t*w_ref")
+    g.add_argument("--zeta", type=float, default=0.5, help="closed-loop damping ratio [-] (default 0.5)")
+    g.add_argument("--omega-n", type=float, default=2.2, help="closed-loop natural frequency [rad/s] (default 2.2)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``abu`` argument parser with every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="abu", description="Static friction of a ball in an automatic balancing unit: "
+                                "FMI co-simulation and high-speed camera measurement.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("build-fmus", help="build AbuBall.fmu, SpeedController.fmu, Staircase.fmu",
+                       description="Build the three FMI 2.0 co-simulation FMUs (pythonfmu).")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_build_fmus)
+
+    p = sub.add_parser("simulate", help="co-simulate the staircase or the ramp experiment",
+                       description="Co-simulate an experiment of the report (ch. 4) on the FMUs and "
+                                   "compute the friction bounds mu_low <= mu < mu_high.")
+    p.add_argument("--motion", choices=["staircase", "ramp"], default="staircase",
+                   help="staircase of setpoints (sec. 4.2, default) or prescribed acceleration "
+                        "ramp (sec. 4.1)")
+    g = p.add_argument_group("staircase")
+    g.add_argument("--omega0-hz", type=float, default=-17.0, help="initial speed [Hz] (default -17)")
+    g.add_argument("--omega-end-hz", type=float, default=-22.0, help="end of the inclined sine [Hz] (default -22)")
+    g.add_argument("--t0", type=float, default=0.0, help="start of the inclined sine [s] (default 0)")
+    g.add_argument("--te", type=float, default=1.0, help="duration of the inclined sine [s] (default 1)")
+    g.add_argument("--t-end", type=float, default=None,
+                   help="end of the simulation [s] (default: t0 + te + 0.5; ramp: 1)")
+    g.add_argument("--step-hz", type=float, default=1.0, help="setpoint resolution [Hz] (default 1)")
+    g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
+                   help="when each step happens on the sine (default lead: the report's)")
+    _add_controller_options(p)
+    g = p.add_argument_group("ramp")
+    g.add_argument("--jerk", type=float, default=3000.0,
+                   help="growth rate K of |omega_dot| [rad/s^3] (default 3000)")
+    _add_plant_options(p)
+    g = p.add_argument_group("run")
+    g.add_argument("--comm-step", type=float, default=1e-3, help="communication step [s] (default 0.001)")
+    g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built there if missing; "
+                                                   "default: a temporary build)")
+    g.add_argument("--out", default=None, help="write result.csv, summary.json and PNG plots here")
+    g.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
+    g.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("table41", help="smallest |omega0| at which one step keeps the ball stuck",
+                       description="Table 4.1 of the report: for each mu, the smallest integer "
+                                   "|omega0| [Hz] at which one setpoint step from steady rotation "
+                                   "does not make the ball slip (closed form, checked by "
+                                   "co-simulation of that value and the one below).")
+    p.add_argument("--mu", type=float, nargs="+", required=True, help="friction coefficients [-]")
+    p.add_argument("--theta-ref", choices=["integral", "thesis"], default="integral",
+                   help="theta_ref reading (default integral)")
+    p.add_argument("--t-step", type=float, default=0.0, help="time of the step [s] (thesis mode; default 0)")
+    p.add_argument("--step-hz", type=float, default=1.0, help="setpoint step [Hz] (default 1)")
+    p.add_argument("--no-check", action="store_true", help="skip the co-simulation check")
+    p.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built if missing)")
+    p.add_argument("--json", action="store_true", help="print a JSON list on stdout")
+    p.set_defaults(func=cmd_table41)
+
+    p = sub.add_parser("demo", help="build the FMUs and rerun the report's staircase simulation",
+                       description="Build the FMUs, co-simulate the report's staircase experiment "
+                                   "(sec. 4.2.3: mu = 2.75e-3, -17 Hz -> -22 Hz in 1 s) with both "
+                                   "theta_ref readings, print the bounds and write plots.")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_demo)
+
+    from measurement.cli import register
+    register(sub)
+    return parser
+
+
+# ---------------------------------------------------------------------------- commands
+def cmd_build_fmus(args: argparse.Namespace) -> int:
+    from fmus.build import build_fmus
+
+    for name, path in build_fmus(Path(args.out)).items():
+        print(f"{name}: {path}")
+    return 0
+
+
+def staircase_from_args(args: argparse.Namespace):
+    """The :class:`~harness.experiments.StaircaseExperiment` the options describe."""
+    from .experiments import StaircaseExperiment
+
+    w0 = _finite("--omega0-hz", args.omega0_hz)
+    we = _finite("--omega-end-hz", args.omega_end_hz)
+    step = _finite("--step-hz", args.step_hz)
+    if step <= 0:
+        raise ParameterError("--step-hz", step, "a setpoint step > 0 Hz")
+    if w0 == 0:
+        raise ParameterError("--omega0-hz", w0, "a non-zero speed [Hz] (no normal force at rest)")
+    if math.floor(abs(we - w0) / step + 1e-9) < 1:
+        raise ParameterError("--omega-end-hz", we, f"a speed at least --step-hz = {step:g} Hz "
+                             f"away from --omega0-hz = {w0:g} Hz (the staircase has no step)")
+    try:
+        return StaircaseExperiment(
+            _plant(args), w0 * HZ, we * HZ, t0=args.t0, te=args.te, t_end=args.t_end,
+            step=step * HZ, rounding=args.rounding, theta_ref_mode=args.theta_ref,
+            zeta=args.zeta, omega_n=args.omega_n, comm_step=args.comm_step, beta0=args.beta0)
+    except ParameterError as exc:
+        raise _renamed(exc) from None
+
+
+def ramp_from_args(args: argparse.Namespace):
+    """The :class:`~harness.experiments.RampExperiment` the options describe."""
+    from .experiments import RampExperiment
+
+    w0 = _finite("--omega0-hz", args.omega0_hz)
+    if w0 == 0:
+        raise ParameterError("--omega0-hz", w0, "a non-zero speed [Hz]")
+    try:
+        return RampExperiment(_plant(args), w0 * HZ, args.jerk,
+                              1.0 if args.t_end is None else args.t_end,
+                              comm_step=args.comm_step, beta0=args.beta0)
+    except ParameterError as exc:
+        raise _renamed(exc) from None
+
+
+def write_outputs(result, out: Path) -> list[Path]:
+    """result.csv, summary.json and the PNG plots of an experiment into ``out``."""
+    from .plots import plot_experiment
+    from .results_io import write_json, write_table_csv
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = [write_table_csv(out / "result.csv", result.table, result.units),
+               write_json(out / "summary.json", result.summary)]
+    return written + plot_experiment(result.table, result.summary, out)
+
+
+def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
+    if value is None:
+        return "none"
+    return f"{value:.{digits}g}{(' ' + unit) if unit else ''}"
+
+
+def describe(summary: dict[str, Any]) -> list[str]:
+    """Human-readable lines (with units) of an experiment summary."""
+    lines = [f"true mu = {_fmt(summary['mu'])} [-]"]
+    if "mu_low" in summary:
+        lines.append(f"mu_low = {_fmt(summary['mu_low'])} [-], "
+                     f"mu_high = {_fmt(summary['mu_high'])} [-]")
+    if summary.get("mu_estimate") is not None:
+        lines.append(f"mu estimate at the slip (eq. 4.1/4.2) = {_fmt(summary['mu_estimate'], '', 7)} [-]")
+    lines.append(f"first slip at t = {_fmt(summary['t_slip'], 's', 9)}"
+                 + (f", omega = {_fmt(summary['omega_slip'], 'rad/s')}"
+                    f" ({_fmt(summary['omega_slip'] / HZ, 'Hz')}), "
+                    f"omega_dot = {_fmt(summary['alpha_slip'], 'rad/s^2')}"
+                    if summary.get("t_slip") is not None else ""))
+    if summary.get("t_restick") is not None:
+        lines.append(f"sticks again at t = {_fmt(summary['t_restick'], 's', 9)}")
+    lines.append(f"switches: {len(summary['switches'])}; {summary.get('message', '')}")
+    return lines
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .experiments import run_ramp, run_staircase
+
+    if args.motion == "staircase":
+        result = run_staircase(staircase_from_args(args), args.fmu_dir, progress=args.progress)
+    else:
+        result = run_ramp(ramp_from_args(args), args.fmu_dir, progress=args.progress)
+    written = write_outputs(result, Path(args.out)) if args.out else []
+    if args.json:
+        from .results_io import to_jsonable
+        print(json.dumps(to_jsonable(result.summary), indent=2, allow_nan=False))
+    else:
+        print("\n".join(describe(result.summary)))
+        for path in written:
+            print(f"wrote {path}")
+    return 0
+
+
+def cmd_table41(args: argparse.Namespace) -> int:
+    from .table41 import REPORT_TABLE, table41
+
+    try:
+        rows = table41(args.mu, theta_ref_mode=args.theta_ref, t_step=args.t_step,
+                       step_hz=args.step_hz, check=not args.no_check, fmu_dir=args.fmu_dir)
+    except ParameterError as exc:
+        raise _renamed(exc) from None
+    if args.json:
+        from .results_io import to_jsonable
+        print(json.dumps(to_jsonable([r.as_dict() for r in rows]), indent=2, allow_nan=False))
+        return 0
+    print(f"{'mu [-]':>12} {'omega0 [Hz]':>12} {'threshold [Hz]':>15} {'jump [rad/s^2]':>15} "
+          f"{'report [Hz]':>12} {'checked':>8}")
+    for r in rows:
+        report = next((f for mu, f in REPORT_TABLE.items() if abs(mu - r.mu) <= 1e-12), None)
+        checked = {None: "-", True: "yes", False: "NO"}[r.consistent]
+        print(f"{r.mu:>12.4g} {r.omega0_hz:>12d} {r.threshold_hz:>15.4f} {r.jump_rad_s2:>15.4f} "
+              f"{'' if report is None else report:>12} {checked:>8}")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from fmus.build import build_fmus
+
+    from .experiments import StaircaseExperiment, run_staircase
+
+    out = Path(args.out)
+    fmus = build_fmus(out / "fmus")
+    print(f"built {', '.join(str(p) for p in fmus.values())}")
+    print("report sec. 4.2.3: mu = 2.75e-3, omega0 = -17 Hz -> omega_end = -22 Hz, t0 = 0 s, "
+          "te = 1 s, 1 Hz steps")
+    for mode in ("integral", "thesis"):
+        exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ, theta_ref_mode=mode)
+        result = run_staircase(exp, fmus)
+        s = result.summary
+        written = write_outputs(result, out / mode)
+        print(f"\n[{mode}] mu_low = {_fmt(s['mu_low'])} [-] <= mu = {_fmt(s['mu'])} [-] < "
+              f"mu_high = {_fmt(s['mu_high'])} [-]; first slip at t = {_fmt(s['t_slip'], 's', 6)}")
+        if mode == "thesis":
+            print(f"[{mode}] report eq. 4.9: mu_low = {REPORT_BOUNDS['mu_low']:g} [-], "
+                  f"mu_high = {REPORT_BOUNDS['mu_high']:g} [-] (differences "
+                  f"{100 * (s['mu_low'] / REPORT_BOUNDS['mu_low'] - 1):+.1f} %, "
+                  f"{100 * (s['mu_high'] / REPORT_BOUNDS['mu_high'] - 1):+.1f} %)")
+        print(f"[{mode}] wrote {len(written)} files into {out / mode}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``abu`` command line; returns the exit status (2 for user errors)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except AbuError as exc:
+        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # unwritable output folder, missing input file...
+        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"abu {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
