@@ -37,10 +37,9 @@ import graphlib
 import math
 import tempfile
 from collections import deque
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import numpy as np
 
@@ -189,6 +188,28 @@ class _Instance:
     def has_output(self, name: str) -> bool:
         var = self.variables.get(name)
         return var is not None and var.causality == "output"
+
+
+class _Guard:
+    """Turns an FMICallException of one instance into FMUError (a class: cheaper than a
+    generator-based context manager on the per-step path)."""
+
+    __slots__ = ("inst", "what")
+
+    def __init__(self, inst: "_Instance", what: str):
+        self.inst, self.what = inst, what
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None or not issubclass(exc_type, FMICallException):
+            return False
+        inst = self.inst
+        inst.failed_status = exc.status
+        status = _STATUS[exc.status] if 0 <= exc.status < len(_STATUS) else str(exc.status)
+        raise FMUError(inst.name, inst.path, exc.function or self.what, status,
+                       list(inst.messages)) from None
 
 
 _GETTERS = {"Real": "getReal", "Integer": "getInteger", "Boolean": "getBoolean"}
@@ -357,15 +378,9 @@ class CoSimulation:
             pass
         self._callbacks = callbacks
 
-    @contextmanager
-    def _guard(self, inst: _Instance, what: str) -> Iterator[None]:
-        try:
-            yield
-        except FMICallException as exc:
-            inst.failed_status = exc.status
-            status = _STATUS[exc.status] if 0 <= exc.status < len(_STATUS) else str(exc.status)
-            raise FMUError(inst.name, inst.path, exc.function or what, status,
-                           list(inst.messages)) from None
+    def _guard(self, inst: _Instance, what: str) -> "_Guard":
+        """Context turning an FMI failure of ``inst`` into :class:`FMUError`."""
+        return _Guard(inst, what)
 
     # ------------------------------------------------------------------ structure
     def _resolve(self, qualified: str, role: str, causality: tuple[str, ...] | None = None):
@@ -538,13 +553,20 @@ class CoSimulation:
         """(switch_count, t_last_switch, mode, t_first_step_switch) of each switching FMU."""
         info = []
         for inst, count_var, time_var, mode_var, first_var in self._switch_plan:
-            count = self._get(inst, count_var.type, [count_var.valueReference])[0]
-            reals = [time_var] + ([first_var] if first_var is not None else [])
-            times = self._get(inst, "Real", [v.valueReference for v in reals])
-            mode = (self._get(inst, mode_var.type, [mode_var.valueReference])[0]
-                    if mode_var is not None else None)
-            info.append((int(count), float(times[0]), mode,
-                         float(times[1]) if first_var is not None else None))
+            # One FMI call per type: group the variables of each type.
+            wanted = [count_var, time_var, mode_var, first_var]
+            values: list[Any] = [None] * 4
+            by_type: dict[str, list[int]] = {}
+            for i, var in enumerate(wanted):
+                if var is not None:
+                    by_type.setdefault(var.type, []).append(i)
+            for type_, indices in by_type.items():
+                got = self._get(inst, type_, [wanted[i].valueReference for i in indices])
+                for i, value in zip(indices, got):
+                    values[i] = value
+            count, t_last, mode, t_first = values
+            info.append((int(count), float(t_last), mode,
+                         None if t_first is None else float(t_first)))
         return info
 
     # ------------------------------------------------------------------ run

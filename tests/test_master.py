@@ -15,7 +15,6 @@ step is x <- x + k (r - x)(h - k h^2 / 2): an independent recurrence the tests c
 from __future__ import annotations
 
 import math
-import re
 import textwrap
 import zipfile
 from pathlib import Path
