@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq
 
@@ -83,8 +83,14 @@ def _first_step_stick_speed(mu: float, jump: float, plant: PlantParams) -> float
     return math.sqrt(plant.ball.lever_ratio * abs(jump) / mu)
 
 
+# Each example costs about a second; shrinking is skipped (phases) to keep failures cheap.
 @settings(max_examples=4, deadline=None, derandomize=True,
+          phases=(Phase.explicit, Phase.generate),
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+# Found by this test: the ball sticks again after a slip and a later setpoint step makes it slip
+# again from beta_dot = 0 (thesis reading).
+@example(mu=0.0234375, margin=1.4375, n_steps=5, te=1.203125, rounding="nearest", mode="thesis",
+         sign=-1.0)
 @given(mu=st.floats(1e-3, 5e-2), margin=st.floats(1.05, 1.6), n_steps=st.integers(2, 7),
        te=st.floats(0.5, 1.5), rounding=st.sampled_from(["lead", "nearest", "trail"]),
        mode=st.sampled_from(["integral", "thesis"]), sign=st.sampled_from([-1.0, 1.0]))
