@@ -122,8 +122,11 @@ def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
                 continue
             events = ([stick_margin(1.0), stick_margin(-1.0)] if mode == Mode.STICK
                       else [slip_stop(mode)])
+            # An explicit first step: SciPy's automatic one can be below the spacing of t
+            # (beta' = 0 with atol 1e-13), which re-fires the slip-stop event at t forever.
+            first = min(t_stop - t, max_step, max(1e-10, 64 * np.spacing(abs(t))))
             sol = solve_ivp(rhs_for(mode), (t, t_stop), y, method="DOP853", rtol=RTOL,
-                            atol=ATOL, events=events, max_step=max_step)
+                            atol=ATOL, events=events, max_step=max_step, first_step=first)
             if not sol.success:
                 raise SimulationError(f"reference integration failed at t = {t:.9g} s: "
                                       f"{sol.message}")
