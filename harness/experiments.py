@@ -50,6 +50,9 @@ _PLANT_PROBES = {
     "torque_applied": "plant.torque_applied",
 }
 
+#: Relative tolerance of the bracket check (rounding of mu_req at a continuous slip).
+BRACKET_RTOL = 1e-9
+
 
 # ---------------------------------------------------------------------------- FMUs
 _FMU_CACHE: dict[str, Path] | None = None
@@ -304,11 +307,13 @@ def run_staircase(exp: StaircaseExperiment, fmu_dir: Any = None,
     if bounds["t_slip"] is None:
         summary["message"] = ("the ball never slips: mu_low is a lower bound only "
                               "(mu_high and t_slip are null)")
-        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu)
+        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL))
     else:
         at_step = any(abs(bounds["t_slip"] - ts) <= 1e-9 for ts in step_times)
         summary["slip_at_setpoint_step"] = at_step
-        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu <= bounds["mu_high"])
+        # at a continuous slip mu_low = mu_high = mu up to rounding: compare with a tolerance
+        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL)
+                                      and bounds["mu_high"] >= mu * (1 - BRACKET_RTOL))
         if bounds["mu_low"] == 0.0:
             summary["message"] = ("the ball slips at the first acceleration step: no stick period "
                                   "with acceleration, mu_low = 0 carries no information; start "

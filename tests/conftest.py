@@ -6,6 +6,11 @@ and Staircase.
 """
 from __future__ import annotations
 
+import os
+
+# Before NumPy loads: multi-threaded BLAS is slower on the small problems here (see harness).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from pathlib import Path
 
 import pytest

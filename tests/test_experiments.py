@@ -192,6 +192,7 @@ def test_motor_lag_removes_the_acceleration_steps(fmu_dir):
     assert s["mu_low"] == pytest.approx(2.75e-3, rel=1e-6)
     assert s["mu_high"] == pytest.approx(2.75e-3, rel=1e-6)
     assert not s["slip_at_setpoint_step"]
+    assert s["brackets_mu"]  # equal bounds up to rounding still bracket mu
 
 
 def test_ball_reaction_scales_the_acceleration_by_the_inertias(fmu_dir, integral_run):
