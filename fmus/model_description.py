@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import copy
 import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 from xml.etree import ElementTree as ET
 
+from abu_model.atomic_io import atomic_open
 from abu_model.errors import AbuError
 
 #: SI base-unit exponents of the units used by the FMUs (Modelica unit syntax for the names).
@@ -211,22 +211,13 @@ def rewrite_fmu_model_description(source: str | os.PathLike, target: str | os.Pa
             fixed = fix_model_description(zin.read("modelDescription.xml"), spec)
         except KeyError:
             raise FmuBuildError(f"{source}: no modelDescription.xml in the FMU") from None
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-        os.close(fd)
-        try:
-            with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zout:
-                for info in zin.infolist():
-                    data = fixed if info.filename == "modelDescription.xml" else zin.read(info)
-                    new_info = copy.copy(info)  # keeps name, date and permissions
-                    new_info.compress_type = zipfile.ZIP_DEFLATED
-                    zout.writestr(new_info, data)
-            os.replace(tmp, target)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except FileNotFoundError:
-                pass
-            raise
+        with atomic_open(target, "wb") as handle, \
+                zipfile.ZipFile(handle, "w", compression=zipfile.ZIP_DEFLATED) as zout:
+            for info in zin.infolist():
+                data = fixed if info.filename == "modelDescription.xml" else zin.read(info)
+                new_info = copy.copy(info)  # keeps name, date and permissions
+                new_info.compress_type = zipfile.ZIP_DEFLATED
+                zout.writestr(new_info, data)
     return target
 
 

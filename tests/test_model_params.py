@@ -46,3 +46,22 @@ def test_ball_reaction_adds_ball_inertia_only_when_on():
     assert off.J_total == off.J_abu
     assert on.J_total - on.J_abu == pytest.approx(b.m * b.l**2 + b.J, rel=1e-14)
     assert (on.J_total - on.J_abu) / on.J_abu < 1e-3  # the report's "negligible"
+
+
+def test_atomic_write_leaves_nothing_on_error_and_ordinary_permissions(tmp_path):
+    import os
+    import stat
+
+    from abu_model.atomic_io import atomic_open, atomic_write_text
+
+    target = tmp_path / "out.txt"
+    atomic_write_text(target, "first")
+    with pytest.raises(RuntimeError):
+        with atomic_open(target, "w") as handle:
+            handle.write("half")
+            raise RuntimeError("failure while writing")
+    assert target.read_text() == "first"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]  # no temporary file left
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~mask
