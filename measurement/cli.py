@@ -371,12 +371,8 @@ def register(subparsers) -> None:
                                           "high-speed camera recording (frames.tif, truth.csv, "
                                           "meta.json).")
     p.add_argument("--out", required=True, help="output folder")
-    try:
-        from .twin import add_render_arguments
-    except ImportError:  # the twin is not available: the command explains it when run
-        add_render_arguments = None
-    if add_render_arguments is not None:
-        add_render_arguments(p)
+    from .twin import add_render_arguments
+    add_render_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
     p.set_defaults(func=cmd_render)
 
