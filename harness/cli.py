@@ -16,8 +16,11 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-from abu_model.errors import AbuError, ParameterError
+from abu_model.errors import ParameterError
 from abu_model.params import BallParams, DEFAULT_J_ABU, PlantParams
+
+from .cli_common import AbuArgumentParser, add_overwrite, option_error, run_command
+from .output_tx import output_file, output_folder
 
 HZ = 2.0 * math.pi
 
@@ -71,24 +74,7 @@ def _add_controller_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--omega-n", type=float, default=2.2, help="closed-loop natural frequency [rad/s] (default 2.2)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``abu`` argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
-        prog="abu", description="Static friction of a ball in an automatic balancing unit: "
-                                "FMI co-simulation and high-speed camera measurement.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    p = sub.add_parser("build-fmus", help="build AbuBall.fmu, SpeedController.fmu, Staircase.fmu",
-                       description="Build the three FMI 2.0 co-simulation FMUs (pythonfmu).")
-    p.add_argument("--out", required=True, help="output folder")
-    p.set_defaults(func=cmd_build_fmus)
-
-    p = sub.add_parser("simulate", help="co-simulate the staircase or the ramp experiment",
-                       description="Co-simulate an experiment of the report (ch. 4) on the FMUs and "
-                                   "compute the friction bounds mu_low <= mu < mu_high.")
-    p.add_argument("--motion", choices=["staircase", "ramp"], default="staircase",
-                   help="staircase of setpoints (sec. 4.2, default) or prescribed acceleration "
-                        "ramp (sec. 4.1)")
+def _add_staircase_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("staircase")
     g.add_argument("--omega0-hz", type=float, default=-17.0, help="initial speed [Hz] (default -17)")
     g.add_argument("--omega-end-hz", type=float, default=-22.0, help="end of the inclined sine [Hz] (default -22)")
@@ -99,6 +85,30 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--step-hz", type=float, default=1.0, help="setpoint resolution [Hz] (default 1)")
     g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
                    help="when each step happens on the sine (default lead: the report's)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``abu`` argument parser with every subcommand."""
+    parser = AbuArgumentParser(
+        prog="abu", description="Static friction of a ball in an automatic balancing unit: "
+                                "FMI co-simulation and high-speed camera measurement.")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an unexpected error (any position)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("build-fmus", help="build AbuBall.fmu, SpeedController.fmu, Staircase.fmu",
+                       description="Build the three FMI 2.0 co-simulation FMUs (pythonfmu).")
+    p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
+    p.set_defaults(func=cmd_build_fmus)
+
+    p = sub.add_parser("simulate", help="co-simulate the staircase or the ramp experiment",
+                       description="Co-simulate an experiment of the report (ch. 4) on the FMUs and "
+                                   "compute the friction bounds mu_low <= mu < mu_high.")
+    p.add_argument("--motion", choices=["staircase", "ramp"], default="staircase",
+                   help="staircase of setpoints (sec. 4.2, default) or prescribed acceleration "
+                        "ramp (sec. 4.1)")
+    _add_staircase_options(p)
     _add_controller_options(p)
     g = p.add_argument_group("ramp")
     g.add_argument("--jerk", type=float, default=3000.0,
@@ -109,6 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built there if missing; "
                                                    "default: a temporary build)")
     g.add_argument("--out", default=None, help="write result.csv, summary.json and PNG plots here")
+    add_overwrite(g)
     g.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     g.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     p.set_defaults(func=cmd_simulate)
@@ -136,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "render the synthetic camera twin (sec. 5.3, mu = 0.03), track "
                                    "and measure it.")
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("sweep", help="staircase co-simulations over a grid of mu and omega0 "
@@ -157,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fmu-dir", default=None, help="folder with the FMUs, readable by every worker "
                                                    "(default: built into --out's folder)")
     p.add_argument("--out", required=True, help="CSV file to write")
+    add_overwrite(p)
     p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     p.set_defaults(func=cmd_sweep)
 
@@ -169,8 +182,11 @@ def build_parser() -> argparse.ArgumentParser:
 def cmd_build_fmus(args: argparse.Namespace) -> int:
     from fmus.build import build_fmus
 
-    for name, path in build_fmus(Path(args.out)).items():
-        print(f"{name}: {path}")
+    out = Path(args.out)
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        built = build_fmus(tmp)
+    for name, path in built.items():
+        print(f"{name}: {out / path.name}")
     return 0
 
 
@@ -219,8 +235,18 @@ def write_outputs(result, out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     written = [write_table_csv(out / "result.csv", result.table, result.units),
-               write_json(out / "summary.json", result.summary)]
+               write_json(out / "summary.json", tagged_summary(result.summary))]
     return written + plot_experiment(result.table, result.summary, out)
+
+
+#: ``kind`` and ``format_version`` of an ``abu simulate`` summary.json (readers check them).
+SIMULATE_KIND = "abu-simulate-summary"
+SUMMARY_VERSION = 1
+
+
+def tagged_summary(summary: dict[str, Any]) -> dict[str, Any]:
+    """The summary with its ``kind`` and ``format_version`` first."""
+    return {"kind": SIMULATE_KIND, "format_version": SUMMARY_VERSION, **summary}
 
 
 def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
@@ -251,14 +277,20 @@ def describe(summary: dict[str, Any]) -> list[str]:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .experiments import run_ramp, run_staircase
 
-    if args.motion == "staircase":
-        result = run_staircase(staircase_from_args(args), args.fmu_dir, progress=args.progress)
+    exp = staircase_from_args(args) if args.motion == "staircase" else ramp_from_args(args)
+    run = run_staircase if args.motion == "staircase" else run_ramp
+    written = []
+    if args.out:  # locked and checked before the co-simulation, written at its end
+        out = Path(args.out)
+        with output_folder(out, overwrite=args.overwrite) as tmp:
+            result = run(exp, args.fmu_dir, progress=args.progress)
+            written = [out / p.relative_to(tmp) for p in write_outputs(result, tmp)]
     else:
-        result = run_ramp(ramp_from_args(args), args.fmu_dir, progress=args.progress)
-    written = write_outputs(result, Path(args.out)) if args.out else []
+        result = run(exp, args.fmu_dir, progress=args.progress)
     if args.json:
         from .results_io import to_jsonable
-        print(json.dumps(to_jsonable(result.summary), indent=2, allow_nan=False))
+        print(json.dumps(to_jsonable(tagged_summary(result.summary)), indent=2,
+                         allow_nan=False))
     else:
         print("\n".join(describe(result.summary)))
         for path in written:
@@ -288,14 +320,28 @@ def cmd_table41(args: argparse.Namespace) -> int:
     return 0
 
 
+class _StepFailed(Exception):
+    """A step of the demo failed (its own message is printed): nothing is kept."""
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
+    try:
+        with output_folder(Path(args.out), overwrite=args.overwrite) as tmp:
+            if _demo(tmp):
+                raise _StepFailed
+    except _StepFailed:
+        return 2
+    print(f"\nwrote everything into {args.out}")
+    return 0
+
+
+def _demo(out: Path) -> int:
     from fmus.build import build_fmus
 
     from .experiments import StaircaseExperiment, run_staircase
 
-    out = Path(args.out)
     fmus = build_fmus(out / "fmus")
-    print(f"built {', '.join(str(p) for p in fmus.values())}")
+    print(f"built {', '.join(p.name for p in fmus.values())}")
     print("report sec. 4.2.3: mu = 2.75e-3, omega0 = -17 Hz -> omega_end = -22 Hz, t0 = 0 s, "
           "te = 1 s, 1 Hz steps")
     for mode in ("integral", "thesis"):
@@ -310,7 +356,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
                   f"mu_high = {REPORT_BOUNDS['mu_high']:g} [-] (differences "
                   f"{100 * (s['mu_low'] / REPORT_BOUNDS['mu_low'] - 1):+.1f} %, "
                   f"{100 * (s['mu_high'] / REPORT_BOUNDS['mu_high'] - 1):+.1f} %)")
-        print(f"[{mode}] wrote {len(written)} files into {out / mode}")
+        print(f"[{mode}] wrote {len(written)} files into {mode}/")
     print("\nmeasurement chain on the synthetic camera twin (report sec. 5.3: -9 Hz -> -19 Hz in "
           "0.5 s, 4500 frames/s, true mu = 0.03): render, track, measure", flush=True)
     return (main(["render", "--out", str(out / "twin")])
@@ -330,7 +376,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise ParameterError("--span-hz", span, "a span of at least one 1 Hz step")
     out = Path(args.out)
     fmu_dir = Path(args.fmu_dir) if args.fmu_dir else out.parent / "fmus"
-    build_fmus(fmu_dir)
     points = sweep_grid(args.mu, args.omega0_hz)
     w0 = points[0].omega0_hz * HZ
     try:
@@ -339,30 +384,26 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                    zeta=args.zeta, omega_n=args.omega_n)
     except ParameterError as exc:
         raise _renamed(exc) from None
-    rows = run_sweep(points, base, fmu_dir, scheduler=args.scheduler, workers=args.workers,
-                     progress=args.progress)
-    write_sweep_csv(out, rows)
+    with output_file(out, overwrite=args.overwrite) as tmp:  # locked before the runs
+        build_fmus(fmu_dir)
+        rows = run_sweep(points, base, fmu_dir, scheduler=args.scheduler,
+                         workers=args.workers, progress=args.progress)
+        write_sweep_csv(tmp, rows)
     bracketed = sum(r["bracketed"] for r in rows)
     slipped = sum(r["slipped"] for r in rows)
     print(f"{len(rows)} runs: {slipped} slipped, {bracketed} bracket mu; wrote {out}")
     return 0
 
 
+def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
+    """A library ParameterError named as the option the user typed."""
+    return option_error(exc, OPTION_OF, getattr(args, "_parser", None))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``abu`` command line; returns the exit status (2 for user errors)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except AbuError as exc:
-        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # unwritable output folder, missing input file...
-        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"abu {args.command}: interrupted", file=sys.stderr)
-        return 130
+    """Run the ``abu`` command line; returns the exit status (2 for user errors, 1 for an
+    unexpected error, reported in one line; ``--debug`` shows its traceback)."""
+    return run_command(build_parser, argv, rename=_rename)
 
 
 if __name__ == "__main__":  # pragma: no cover

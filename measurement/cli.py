@@ -21,9 +21,15 @@ from typing import Any, Sequence
 import numpy as np
 
 from abu_model.atomic_io import atomic_write_text
-from abu_model.errors import AbuError, ParameterError
+from abu_model.errors import ParameterError
+from harness.cli_common import AbuArgumentParser, add_overwrite, option_error, run_command
+from harness.output_tx import check_not_inside, output_folder
 
 DEFAULT_FPS = 4500.0
+#: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
+SUMMARY_KIND = "abu-measure-summary"
+SUMMARY_VERSION = 1
+COMBINED_KIND = "abu-measure-summary-combined"
 DEFAULT_L = 1.15e-2
 DEFAULT_D = 3.0e-3
 
@@ -142,13 +148,16 @@ def cmd_track(args: argparse.Namespace) -> int:
     """``abu track INPUT --out DIR``: marker tracks only (tracks.csv, tracking.json)."""
     from . import tracks_io
     fps = _positive("--fps", args.fps, "frames/s") or DEFAULT_FPS
-    tr = _track_frames(args, fps)
     out = Path(args.out)
-    theta, beta = tracks_io.angles_from_pixels(tr["x"], tr["y"])
-    csv_text = tracks_io.format_tracks_csv(tr["time"], theta, beta, tr["x"], tr["y"], tr["lost"])
-    info = _tracking_info(tr, fps)
-    atomic_write_text(out / "tracks.csv", csv_text)
-    atomic_write_text(out / "tracking.json", dumps(info))
+    check_not_inside(out, [args.input])
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        tr = _track_frames(args, fps)
+        theta, beta = tracks_io.angles_from_pixels(tr["x"], tr["y"])
+        csv_text = tracks_io.format_tracks_csv(tr["time"], theta, beta, tr["x"], tr["y"],
+                                               tr["lost"])
+        info = _tracking_info(tr, fps)
+        atomic_write_text(tmp / "tracks.csv", csv_text)
+        atomic_write_text(tmp / "tracking.json", dumps(info))
     _log(args, f"wrote {out / 'tracks.csv'} ({info['frames']} frames, lost "
                f"{info['lost_frames']})")
     return 0
@@ -172,15 +181,28 @@ def _analysis_options(args: argparse.Namespace):
 
 def cmd_measure(args: argparse.Namespace) -> int:
     """``abu measure INPUT --out DIR``: track (or read tracks) and analyse."""
-    from . import tracks_io
-    from .analysis import analyse_tracks
-    from .plots import plot_analysis
-
     l = _positive("--l", args.l, "m")
     d = _positive("--d", args.d, "m")
     fps_opt = _positive("--fps", args.fps, "frames/s")
     options = _analysis_options(args)
     out = Path(args.out)
+    check_not_inside(out, [args.input])
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        summary = _measure(args, l, d, fps_opt, options, tmp)
+    if args.json:
+        sys.stdout.write(dumps(summary))
+    else:
+        print(_describe(summary))
+    return 0
+
+
+def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None, options,
+             out: Path) -> dict:
+    """Track or read the tracks, analyse, write everything into ``out``; returns the summary."""
+    from . import tracks_io
+    from .analysis import analyse_tracks
+    from .plots import plot_analysis
+
     if args.tracks:
         table_in = tracks_io.read_tracks_csv(args.input)
         time, x, y, lost = table_in.time, table_in.x, table_in.y, table_in.lost
@@ -199,7 +221,8 @@ def cmd_measure(args: argparse.Namespace) -> int:
         time, x_f, y_f, lost = tr["time"], tr["x"], tr["y"], tr["lost"]
         tracking = _tracking_info(tr, fps)
     table, summary = analyse_tracks(time, x_f, y_f, l=l, d=d, lost=lost, options=options)
-    summary = {"input": tracking, **summary}
+    summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracking,
+               **summary}
     theta = table["theta_rad"]
     beta = table["beta_rad"]
     tracks_text = tracks_io.format_tracks_csv(time, theta, beta, x_f, y_f, lost)
@@ -210,11 +233,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if not args.no_plots:
         plot_analysis(table, summary, out)
     atomic_write_text(out / "summary.json", summary_text)
-    if args.json:
-        sys.stdout.write(summary_text)
-    else:
-        print(_describe(summary))
-    return 0
+    return summary
 
 
 def _fmt(v: float | None, spec: str = ".4g") -> str:
@@ -252,12 +271,15 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
     """``abu measure-summary SUMMARY.json ... --out DIR``: combine several records' intervals."""
     from .multi import combine_summaries, plot_histogram, read_intervals
 
-    intervals = read_intervals(args.summaries)
-    result = combine_summaries(intervals, bins=args.bins)
     out = Path(args.out)
-    text = dumps(result)
-    plot_histogram(result, out / "histogram.png")
-    atomic_write_text(out / "measure_summary.json", text)
+    check_not_inside(out, args.summaries)
+    intervals = read_intervals(args.summaries)
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        result = {"kind": COMBINED_KIND, "format_version": SUMMARY_VERSION,
+                  **combine_summaries(intervals, bins=args.bins)}
+        text = dumps(result)
+        plot_histogram(result, tmp / "histogram.png")
+        atomic_write_text(tmp / "measure_summary.json", text)
     if args.json:
         sys.stdout.write(text)
     else:
@@ -286,8 +308,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     """``abu render --out DIR``: render the digital twin of the report's experiment."""
     from .twin import render_twin, twin_settings_from_args
     settings = twin_settings_from_args(args)
-    path = render_twin(Path(args.out), settings)
-    _log(args, f"wrote the twin recording to {path}")
+    out = Path(args.out)
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        render_twin(tmp, settings)
+    _log(args, f"wrote the twin recording to {out}")
     return 0
 
 
@@ -316,6 +340,7 @@ def register(subparsers) -> None:
                                           "recording and write tracks.csv.")
     p.add_argument("input", help="folder of frames, multi-page TIFF, .npy stack or video")
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
     _add_tracking_options(p)
     p.set_defaults(func=cmd_track)
 
@@ -326,6 +351,7 @@ def register(subparsers) -> None:
     p.add_argument("input", help="recording (see 'abu track'), or with --tracks a CSV with "
                                  "time,x_center,y_center,x_cd,y_cd,x_ball,y_ball")
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
     p.add_argument("--tracks", action="store_true", help="INPUT is a tracks CSV")
     _add_tracking_options(p)
     p.add_argument("--l", type=float, default=DEFAULT_L,
@@ -362,6 +388,7 @@ def register(subparsers) -> None:
     p.add_argument("summaries", nargs="+", help="summary.json files of 'abu measure' (or a CSV "
                                                 "with columns mu_low,mu_high)")
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
     p.add_argument("--bins", type=int, default=100, help="grid points of the histogram")
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
     p.set_defaults(func=cmd_measure_summary)
@@ -371,6 +398,7 @@ def register(subparsers) -> None:
                                           "high-speed camera recording (frames.tif, truth.csv, "
                                           "meta.json).")
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite(p)
     from .twin import add_render_arguments
     add_render_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
@@ -379,7 +407,7 @@ def register(subparsers) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """A parser with only the measurement commands (the stand-alone entry point)."""
-    parser = argparse.ArgumentParser(prog="abu", description="ABU friction measurement commands")
+    parser = AbuArgumentParser(prog="abu", description="ABU friction measurement commands")
     sub = parser.add_subparsers(dest="command", required=True)
     register(sub)
     return parser
@@ -387,13 +415,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one measurement command; AbuError -> message on stderr and status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except AbuError as exc:
-        print(f"abu {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(build_parser, argv, rename=_rename)
+
+
+#: Library parameter names -> the options of the measurement commands.
+OPTION_OF = {"sg_window_s": "--sg-window-s", "window": "--window", "trim_s": "--trim-s",
+             "poly_degree": "--poly-degree", "k_sigma": "--k-sigma", "mc_draws": "--mc-draws",
+             "fps": "--fps", "bins": "--bins", "l": "--l", "d": "--d", "seeds": "--seeds",
+             "method": "--method"}
+
+
+def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
+    return option_error(exc, OPTION_OF, getattr(args, "_parser", None))
 
 
 if __name__ == "__main__":

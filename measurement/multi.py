@@ -58,6 +58,30 @@ def _check_pair(where: str, lo, hi) -> tuple[float, float]:
     return lo_f, hi_f
 
 
+#: ``kind`` of the summary.json files of ``abu measure`` (see measurement.cli).
+MEASURE_KIND = "abu-measure-summary"
+
+
+def _check_kind(p: Path, data: object) -> None:
+    """Refuse a JSON file that says it is something else (e.g. an ``abu simulate`` summary).
+
+    A file without ``kind`` (hand-written intervals) is accepted unless it has the keys of a
+    simulation summary (``experiment``, ``switches``).
+    """
+    if not isinstance(data, dict):
+        raise IntervalInputError(f"{p}: expected a JSON object (an 'abu measure' summary), got "
+                                 f"{type(data).__name__}")
+    kind = data.get("kind")
+    if kind is None and ("experiment" in data or "switches" in data):
+        kind = "abu-simulate-summary"
+    if kind is not None and kind != MEASURE_KIND:
+        raise IntervalInputError(f"{p}: kind '{kind}' is not a measurement; expected the "
+                                 f"summary.json of 'abu measure' (kind '{MEASURE_KIND}')")
+    version = data.get("format_version", 1)
+    if kind is not None and version != 1:
+        raise IntervalInputError(f"{p}: format_version {version!r}; this version reads 1")
+
+
 def read_intervals(paths: list[str | os.PathLike]) -> list[dict]:
     """Intervals from ``abu measure`` summary.json files and/or CSV files (mu_low,mu_high[,name]).
 
@@ -89,6 +113,7 @@ def read_intervals(paths: list[str | os.PathLike]) -> list[dict]:
             data = json.loads(p.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise IntervalInputError(f"{p}: not a readable JSON summary ({exc})") from None
+        _check_kind(p, data)
         if not isinstance(data, dict) or "mu_low" not in data or "mu_high" not in data:
             raise IntervalInputError(f"{p}: expected an 'abu measure' summary with keys mu_low "
                                      "and mu_high")
