@@ -93,3 +93,33 @@ def slip_direction(plant: PlantParams, torque: float) -> int:
     """Direction (+1/-1) in which a ball leaving stick moves: sign of the friction it would need."""
     f_w = stick_friction(plant.ball, stick_alpha(plant, torque))
     return 1 if f_w > 0.0 else -1
+
+
+def slip_rhs(plant: PlantParams, direction: int, torque: float, rate: float, accel: float):
+    """Right-hand side f(tau, y) of the slip ODE for y = [theta, omega, beta, beta', T_applied].
+
+    The same equations as :func:`accelerations` in slip, inlined for speed (one call per
+    Runge-Kutta stage). Commanded torque T(tau) = torque + rate tau + accel tau^2/2 [N m];
+    without a motor lag T_applied follows it (T_applied' = rate + accel tau), with a lag
+    T_applied' = (T - T_applied)/tau_motor.
+    """
+    ball = plant.ball
+    m, l, d = ball.m, ball.l, ball.d
+    f_scale = ball.mu_dynamic * direction * m
+    c, M = ball.coupling, ball.M_bb
+    tm = plant.tau_motor
+    if plant.ball_reaction:
+        J_tot = plant.J_total
+        det = J_tot * M - c * c
+        a_t, a_w, b_t, b_w = M / det, c * l / det, -c / det, -J_tot * l / det
+    else:
+        J_abu = plant.J_abu
+        a_t, a_w, b_t, b_w = 1.0 / J_abu, 0.0, -c / (M * J_abu), -l / M
+
+    def rhs(tau: float, y: list) -> list:
+        omega, v, applied = y[1], y[3], y[4]
+        f_w = f_scale * (l * (omega + v) ** 2 + 0.4 * l * v * v - 0.2 * d * omega * v)
+        d_applied = (rate + accel * tau if tm == 0.0
+                     else (torque + tau * (rate + 0.5 * accel * tau) - applied) / tm)
+        return [omega, a_t * applied + a_w * f_w, v, b_t * applied + b_w * f_w, d_applied]
+    return rhs

@@ -1,31 +1,30 @@
 """The ABU rotor with one ball as a hybrid (stick/slip) system, stepped with exact switches.
 
-:class:`AbuPlant` integrates one communication step with the commanded torque held to first
-order, T(tau) = torque + torque_rate * tau (pythonfmu has no input derivatives, so the rate is
-an explicit input). Inside the step every stick/slip switch is located exactly:
+:class:`AbuPlant` integrates one communication step with the commanded torque held to second
+order, T(tau) = torque + torque_rate tau + torque_accel tau^2/2 (pythonfmu has no input
+derivatives, so the rates are explicit inputs; torque_accel = 0 is the first-order hold).
+Inside the step every stick/slip switch is located exactly, with the standard library only
+(the plant runs inside FMUs; see :mod:`abu_model.numerics`):
 
-* stick without motor lag: alpha is linear and omega quadratic in tau, so the stick test
-  mu omega^2 - (l - d/5)/l |alpha| >= 0 is a quartic polynomial; its first root is found with
-  numpy's polynomial roots and polished by Newton steps;
+* stick without motor lag: alpha and omega are polynomials in tau, so the stick test
+  mu omega^2 - (l - d/5)/l |alpha| >= 0 is a polynomial (degree 4, or 6 with torque_accel);
+  a cheap bound rules out a sign change in the step before any root is looked for, else its
+  first root is found by splitting into monotone pieces;
 * stick with a motor lag: the trajectory is closed-form (exponential + polynomial); the first
-  root is bracketed on a fine grid and found with ``scipy.optimize.brentq``;
-* slip: the nonlinear ODE is integrated with ``scipy.integrate.solve_ivp`` (DOP853, tight
-  tolerances) with a terminal event at beta' = 0, where the ball either sticks again or slips
-  back the other way.
+  root is bracketed on a fine grid and found with a bracketing root finder;
+* slip: the nonlinear ODE is integrated with a Dormand-Prince 5(4) pair at tight tolerances
+  and the stop at beta' = 0 is located by re-stepping, where the ball either sticks again or
+  slips back the other way.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import IntEnum
 
-import numpy as np
-from numpy.polynomial import polynomial as P
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
-
-from .dynamics import accelerations, mu_required, slip_direction, stick_holds
+from .dynamics import accelerations, mu_required, slip_direction, slip_rhs, stick_holds
 from .errors import AbuError
+from .numerics import brent_root, integrate_until, poly_eval, poly_first_negative, rk45_step
 from .params import PlantParams, check_finite
 
 #: A switch located within this time of a step's end [s] is taken at the step's end.
@@ -34,6 +33,8 @@ END_TOLERANCE = 1e-12
 MAX_SWITCHES_PER_STEP = 50
 #: Grid used to bracket the stick test's first root when a motor lag makes it non-polynomial.
 LAG_BRACKET_POINTS = 64
+#: Relative tolerance of the slip integration (absolute ones are set per component).
+SLIP_RTOL = 1e-12
 
 
 class Mode(IntEnum):
@@ -52,7 +53,7 @@ class SimulationError(AbuError):
     """
 
 
-@dataclass
+@dataclass(slots=True)
 class PlantState:
     """Complete internal state of the plant (everything a rollback must restore)."""
 
@@ -65,6 +66,21 @@ class PlantState:
     mode: int = Mode.STICK       #: -1, 0, +1
     switch_count: int = 0        #: number of stick/slip switches so far
     t_last_switch: float = -math.inf  #: time of the last switch [s]; -inf before any
+
+    def copy(self) -> "PlantState":
+        """An independent copy (cheaper than ``dataclasses.replace``)."""
+        return PlantState(self.time, self.theta, self.omega, self.beta, self.beta_dot,
+                          self.torque_applied, self.mode, self.switch_count, self.t_last_switch)
+
+    def as_tuple(self) -> tuple:
+        """The fields in declaration order (see :data:`STATE_FIELDS`)."""
+        return (self.time, self.theta, self.omega, self.beta, self.beta_dot,
+                self.torque_applied, self.mode, self.switch_count, self.t_last_switch)
+
+
+#: Field names of :class:`PlantState`, in the order of :meth:`PlantState.as_tuple`.
+STATE_FIELDS = ("time", "theta", "omega", "beta", "beta_dot", "torque_applied", "mode",
+                "switch_count", "t_last_switch")
 
 
 @dataclass(frozen=True)
@@ -111,11 +127,11 @@ class AbuPlant:
     # ----------------------------------------------------------------- state handling
     def get_state(self) -> PlantState:
         """A copy of the complete state."""
-        return replace(self.state)
+        return self.state.copy()
 
     def set_state(self, state: PlantState) -> None:
         """Restore a state obtained from :meth:`get_state`."""
-        self.state = replace(state)
+        self.state = state.copy()
 
     # ----------------------------------------------------------------- outputs
     def applied_torque(self, torque: float) -> float:
@@ -130,8 +146,11 @@ class AbuPlant:
                             mu_required(self.params.ball, acc.alpha, s.omega))
 
     # ----------------------------------------------------------------- stepping
-    def advance(self, h: float, torque: float, torque_rate: float) -> list[Switch]:
-        """Integrate over [time, time + h] with T(tau) = torque + torque_rate tau.
+    def advance(self, h: float, torque: float, torque_rate: float,
+                torque_accel: float = 0.0) -> list[Switch]:
+        """Integrate over [time, time + h] with T(tau) = torque + torque_rate tau + torque_accel tau^2/2.
+
+        Units: h [s], torque [N m], torque_rate [N m/s], torque_accel [N m/s^2].
 
         Returns the switches that happened in the step, in time order. Raises
         :class:`SimulationError` if the ball would lift off the rim or chatter.
@@ -150,14 +169,14 @@ class AbuPlant:
                     self._switch(switches, start_time + tau,
                                  slip_direction(self.params, s.torque_applied))
                     continue
-                tau_fail = self._advance_stick(tau, h, torque, torque_rate)
+                tau_fail = self._advance_stick(tau, h, torque, torque_rate, torque_accel)
                 if tau_fail is None:
                     break
                 tau = tau_fail
                 self._switch(switches, start_time + tau,
                              slip_direction(self.params, s.torque_applied))
             else:
-                tau_zero = self._advance_slip(tau, h, torque, torque_rate)
+                tau_zero = self._advance_slip(tau, h, torque, torque_rate, torque_accel)
                 if tau_zero is None:
                     break
                 tau = tau_zero
@@ -184,149 +203,126 @@ class AbuPlant:
         s.t_last_switch = float(t)
 
     # -- stick ------------------------------------------------------------------------
-    def _advance_stick(self, tau0: float, h: float, torque: float, rate: float) -> float | None:
+    def _advance_stick(self, tau0: float, h: float, torque: float, rate: float,
+                       accel: float) -> float | None:
         """Advance in stick from tau0; stop at the first stick-test failure (returned) or at h."""
         if self.params.tau_motor == 0.0:
-            return self._advance_stick_polynomial(tau0, h, torque, rate)
-        return self._advance_stick_lag(tau0, h, torque, rate)
+            return self._advance_stick_polynomial(tau0, h, torque, rate, accel)
+        return self._advance_stick_lag(tau0, h, torque, rate, accel)
 
-    def _advance_stick_polynomial(self, tau0: float, h: float, torque: float,
-                                  rate: float) -> float | None:
+    def _advance_stick_polynomial(self, tau0: float, h: float, torque: float, rate: float,
+                                  accel: float) -> float | None:
         s, ball = self.state, self.params.ball
         J = self.params.J_total
-        # Polynomials in u = tau - tau0 (ascending coefficients).
-        T0 = torque + rate * tau0
-        alpha = np.array([T0 / J, rate / J])
-        omega = np.array([s.omega, T0 / J, 0.5 * rate / J])
-        theta = np.array([s.theta, s.omega, 0.5 * T0 / J, rate / (6.0 * J)])
-        mu_w2 = ball.mu * P.polymul(omega, omega)
+        # Polynomials in u = tau - tau0 (ascending coefficients); T(u) = T0 + r0 u + a u^2/2.
+        T0 = torque + rate * tau0 + 0.5 * accel * tau0 * tau0
+        r0 = rate + accel * tau0
+        alpha = (T0 / J, r0 / J, 0.5 * accel / J)
+        omega = (s.omega, T0 / J, 0.5 * r0 / J, accel / (6.0 * J))
+        n = 4 if accel != 0.0 else 3
+        mu_w2 = [0.0] * (2 * n - 1)
+        for i in range(n):
+            for j in range(n):
+                mu_w2[i + j] += omega[i] * omega[j]
+        mu_w2 = [ball.mu * v for v in mu_w2]
         k = ball.lever_ratio
         span = h - tau0
         u_fail = None
         for sign in (1.0, -1.0):  # g = mu omega^2 -/+ k alpha
-            g = P.polysub(mu_w2, sign * k * alpha)
-            u = _first_negative_root(g, span)
+            g = list(mu_w2)
+            for i in range(3):
+                g[i] -= sign * k * alpha[i]
+            u = poly_first_negative(g, span, END_TOLERANCE)
             if u is not None and (u_fail is None or u < u_fail):
                 u_fail = u
-        u_end = span if u_fail is None else u_fail
-        s.theta = float(P.polyval(u_end, theta))
-        s.omega = float(P.polyval(u_end, omega))
-        s.torque_applied = T0 + rate * u_end
+        u = span if u_fail is None else u_fail
+        s.theta = s.theta + u * (s.omega + u * (0.5 * T0 + u * (r0 / 6.0 + u * accel / 24.0)) / J)
+        s.omega = poly_eval(omega, u)
+        s.torque_applied = T0 + u * (r0 + 0.5 * accel * u)
         return None if u_fail is None else tau0 + u_fail
 
-    def _lag_trajectory(self, tau0: float, torque: float, rate: float):
-        """Closed-form stick trajectory with the motor lag, as functions of u = tau - tau0."""
+    def _lag_trajectory(self, tau0: float, torque: float, rate: float, accel: float):
+        """Closed-form stick trajectory with the motor lag, as functions of u = tau - tau0.
+
+        Commanded T(u) = T0 + r0 u + a u^2/2; the applied torque is the lag's particular
+        solution A + B u + C u^2 plus D exp(-u/tm).
+        """
         s, tm, J = self.state, self.params.tau_motor, self.params.J_total
-        T0 = torque + rate * tau0
-        A, B = T0 - rate * tm, rate
-        C = s.torque_applied - A
+        T0 = torque + rate * tau0 + 0.5 * accel * tau0 * tau0
+        r0 = rate + accel * tau0
+        C = 0.5 * accel
+        B = r0 - accel * tm
+        A = T0 - tm * B
+        D = s.torque_applied - A
         omega0, theta0 = s.omega, s.theta
+        exp, expm1 = math.exp, math.expm1
 
-        def applied(u):
-            return A + B * u + C * np.exp(-u / tm)
+        def applied(u: float) -> float:
+            return A + B * u + C * u * u + D * exp(-u / tm)
 
-        def omega(u):
-            return omega0 + (A * u + 0.5 * B * u * u + C * tm * -np.expm1(-u / tm)) / J
+        def omega(u: float) -> float:
+            return omega0 + (A * u + 0.5 * B * u * u + C * u**3 / 3.0
+                             + D * tm * -expm1(-u / tm)) / J
 
-        def theta(u):
-            return theta0 + omega0 * u + (0.5 * A * u * u + B * u**3 / 6.0
-                                          + C * tm * (u + tm * np.expm1(-u / tm))) / J
+        def theta(u: float) -> float:
+            return theta0 + omega0 * u + (0.5 * A * u * u + B * u**3 / 6.0 + C * u**4 / 12.0
+                                          + D * tm * (u + tm * expm1(-u / tm))) / J
         return applied, omega, theta
 
-    def _advance_stick_lag(self, tau0: float, h: float, torque: float, rate: float) -> float | None:
+    def _advance_stick_lag(self, tau0: float, h: float, torque: float, rate: float,
+                           accel: float) -> float | None:
         s, ball, J = self.state, self.params.ball, self.params.J_total
-        applied, omega, theta = self._lag_trajectory(tau0, torque, rate)
+        applied, omega, theta = self._lag_trajectory(tau0, torque, rate, accel)
         k, mu = ball.lever_ratio, ball.mu
 
-        def margin(u):  # >= 0 while the ball can stick
-            return mu * omega(u) ** 2 - k * np.abs(applied(u) / J)
+        def margin(u: float) -> float:  # >= 0 while the ball can stick
+            return mu * omega(u) ** 2 - k * abs(applied(u) / J)
 
         span = h - tau0
-        grid = np.linspace(0.0, span, LAG_BRACKET_POINTS + 1)
-        values = margin(grid)
         u_fail = None
-        negative = np.nonzero(values < 0.0)[0]
-        if negative.size:
-            i = int(negative[0])
-            u_fail = 0.0 if i == 0 else brentq(margin, grid[i - 1], grid[i], xtol=1e-15,
-                                               rtol=1e-15)
+        previous = 0.0
+        for i in range(LAG_BRACKET_POINTS + 1):
+            u = span * i / LAG_BRACKET_POINTS
+            value = margin(u)
+            if value < 0.0:
+                u_fail = 0.0 if i == 0 else brent_root(margin, previous, u, None, value)
+                break
+            previous = u
         else:  # a root within END_TOLERANCE beyond the step end is taken at the end
             if margin(span + END_TOLERANCE) < 0.0:
                 u_fail = span
         u_end = span if u_fail is None else u_fail
-        s.theta, s.omega = float(theta(u_end)), float(omega(u_end))
-        s.torque_applied = float(applied(u_end))
+        s.theta, s.omega = theta(u_end), omega(u_end)
+        s.torque_applied = applied(u_end)
         return None if u_fail is None else tau0 + u_fail
 
     # -- slip -------------------------------------------------------------------------
-    def _advance_slip(self, tau0: float, h: float, torque: float, rate: float) -> float | None:
+    def _advance_slip(self, tau0: float, h: float, torque: float, rate: float,
+                      accel: float) -> float | None:
         """Integrate the slip ODE from tau0; stop at beta' = 0 (returned) or at h."""
         s, params = self.state, self.params
         direction = s.mode
-        tm = params.tau_motor
+        if h <= tau0:
+            return None
+        rhs = slip_rhs(params, direction, torque, rate, accel)
 
-        def rhs(tau, y):
-            theta, omega, beta, beta_dot, applied = y
-            acc = accelerations(params, applied, omega, beta_dot, direction)
-            d_applied = rate if tm == 0.0 else (torque + rate * tau - applied) / tm
-            return (omega, acc.alpha, beta_dot, acc.beta_ddot, d_applied)
-
-        def stops(tau, y):  # beta' returns to zero
+        def stops(tau: float, y: list) -> float:  # beta' returns to zero
             return direction * y[3]
-        stops.terminal, stops.direction = True, -1
 
         y0 = [s.theta, s.omega, s.beta, s.beta_dot, s.torque_applied]
-        tau_end = h + END_TOLERANCE if h > tau0 else h
-        if tau_end <= tau0:
-            return None
-        scale_torque = max(abs(torque), abs(rate) * h, 1e-12)
-        sol = solve_ivp(rhs, (tau0, tau_end), y0, method="DOP853", rtol=1e-11,
-                        atol=[1e-13, 1e-11, 1e-13, 1e-11, 1e-12 * scale_torque],
-                        events=(stops,), dense_output=True)
-        if not sol.success:
+        scale_torque = max(abs(torque), abs(rate) * h, abs(accel) * h * h, 1e-12)
+        atol = (1e-14, 1e-12, 1e-14, 1e-12, 1e-13 * scale_torque)
+        try:
+            tau, y, stopped = integrate_until(rhs, tau0, y0, h, SLIP_RTOL, atol, stops)
+            if not stopped:  # a stop within END_TOLERANCE after the step end is taken at h
+                y_late = rk45_step(rhs, h, y, END_TOLERANCE)[0]
+                stopped = stops(h + END_TOLERANCE, y_late) <= 0.0
+        except ArithmeticError as exc:
             raise SimulationError(f"slip integration failed at t = {s.time + tau0:.9g} s: "
-                                  f"{sol.message}")
-        if sol.t_events[0].size:
-            tau_zero = min(float(sol.t_events[0][0]), h)
-            y = sol.y_events[0][0]
-        else:
-            # integrated to h + tolerance (to catch a stop at the step's end): state at h
-            tau_zero, y = None, sol.sol(h)
-        s.theta, s.omega, s.beta, s.beta_dot, s.torque_applied = (float(v) for v in y)
-        if tm == 0.0:
-            s.torque_applied = torque + rate * (h if tau_zero is None else tau_zero)
+                                  f"{exc}") from None
+        s.theta, s.omega, s.beta, s.beta_dot, s.torque_applied = y
+        tau_zero = min(tau, h) if stopped else None
+        if params.tau_motor == 0.0:
+            u = h if tau_zero is None else tau_zero
+            s.torque_applied = torque + rate * u + 0.5 * accel * u * u
         return tau_zero
-
-
-def _first_negative_root(g: np.ndarray, span: float) -> float | None:
-    """First u in [0, span] after which the polynomial g (ascending) turns negative, or None.
-
-    Returns 0 if g is negative right after 0. A root within END_TOLERANCE beyond span is
-    returned as span.
-    """
-    g = np.trim_zeros(np.asarray(g, dtype=float), "b")
-    if g.size == 0:
-        return None
-    if g.size == 1:
-        return 0.0 if g[0] < 0.0 else None
-    limit = span + END_TOLERANCE
-    roots = []
-    for r in P.polyroots(g):
-        if abs(r.imag) > 1e-7 * max(1.0, abs(r.real)):
-            continue
-        x = r.real
-        dg = P.polyder(g)
-        for _ in range(3):  # Newton polish: companion-matrix roots lose digits
-            d = P.polyval(x, dg)
-            if d == 0.0:
-                break
-            x -= P.polyval(x, g) / d
-        if 0.0 < x <= limit:
-            roots.append(x)
-    points = [0.0] + sorted(roots) + [limit]
-    if P.polyval(0.0, g) < 0.0:
-        return 0.0
-    for a, b in zip(points[:-1], points[1:]):
-        if b > a and P.polyval(0.5 * (a + b), g) < 0.0:
-            return min(a, span)
-    return None

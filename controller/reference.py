@@ -13,16 +13,15 @@ The setup only takes setpoints with a 1 Hz resolution, so the sine is approximat
 * ``trail``   omega0 + k step,
 
 in the direction of omega_end. Step times are the exact roots of p(s) = target (p is
-monotone), found with ``scipy.optimize.brentq``; they are never found by sampling.
+monotone), found by a safeguarded Newton iteration to the last ulp; they are never found by
+sampling. Standard library only: this module runs inside the Staircase FMU.
 """
 from __future__ import annotations
 
 import bisect
 import math
 from dataclasses import dataclass, field
-
-import numpy as np
-from scipy.optimize import brentq
+from typing import Iterable
 
 ROUNDINGS = ("lead", "nearest", "trail")
 
@@ -45,37 +44,68 @@ def _finite(name: str, value: float) -> float:
     return number
 
 
-def sine_progress(s: float | np.ndarray) -> float | np.ndarray:
+def sine_progress(s: float) -> float:
     """p(s) = s - sin(2 pi s)/(2 pi): the inclined sine's normalised progress, 0 at s=0, 1 at s=1."""
-    return s - np.sin(2.0 * np.pi * s) / (2.0 * np.pi)
+    return s - math.sin(2.0 * math.pi * s) / (2.0 * math.pi)
 
 
-def inclined_sine(t: float | np.ndarray, omega0: float, omega_end: float, t0: float,
-                  te: float) -> float | np.ndarray:
+def _elementwise(f, t):
+    """f(t) for a number, [f(x) for x in t] for a sequence or array (as a list)."""
+    if isinstance(t, (int, float)):
+        return f(float(t))
+    try:
+        return float(f(float(t)))  # 0-d arrays and numpy scalars
+    except TypeError:
+        return [f(float(x)) for x in t]
+
+
+def inclined_sine(t: float | Iterable[float], omega0: float, omega_end: float, t0: float,
+                  te: float) -> float | list[float]:
     """Eq. 4.8 [rad/s], held at omega0 before t0 and at omega_end after t0 + te."""
-    s = np.clip((np.asarray(t, dtype=float) - t0) / te, 0.0, 1.0)
-    value = omega0 + (omega_end - omega0) * sine_progress(s)
-    return float(value) if np.ndim(value) == 0 else value
+    def one(x: float) -> float:
+        s = min(max((x - t0) / te, 0.0), 1.0)
+        return omega0 + (omega_end - omega0) * sine_progress(s)
+    return _elementwise(one, t)
 
 
-def inclined_sine_rate(t: float | np.ndarray, omega0: float, omega_end: float, t0: float,
-                       te: float) -> float | np.ndarray:
+def inclined_sine_rate(t: float | Iterable[float], omega0: float, omega_end: float, t0: float,
+                       te: float) -> float | list[float]:
     """Time derivative of eq. 4.8 [rad/s^2]: (omega_end - omega0)/te (1 - cos(2 pi s)) inside [t0, t0+te]."""
-    t = np.asarray(t, dtype=float)
-    s = (t - t0) / te
-    rate = (omega_end - omega0) / te * (1.0 - np.cos(2.0 * np.pi * s))
-    rate = np.where((s >= 0.0) & (s <= 1.0), rate, 0.0)
-    return float(rate) if np.ndim(rate) == 0 else rate
+    def one(x: float) -> float:
+        s = (x - t0) / te
+        if not 0.0 <= s <= 1.0:
+            return 0.0
+        return (omega_end - omega0) / te * (1.0 - math.cos(2.0 * math.pi * s))
+    return _elementwise(one, t)
 
 
 def _progress_root(target: float) -> float:
-    """The s in [0, 1] with p(s) = target (exact root; p is strictly increasing)."""
+    """The s in [0, 1] with p(s) = target (exact root; p is strictly increasing).
+
+    Newton steps on p (p' = 1 - cos(2 pi s) >= 0), kept inside a shrinking bracket and
+    replaced by bisection where p' vanishes (s = 0, 1), until the bracket is one ulp wide.
+    """
     if target <= 0.0:
         return 0.0
     if target >= 1.0:
         return 1.0
-    return brentq(lambda s: sine_progress(s) - target, 0.0, 1.0, xtol=1e-15, rtol=1e-15,
-                  maxiter=200)
+    lo, hi, s = 0.0, 1.0, target
+    for _ in range(200):
+        f = sine_progress(s) - target
+        if f == 0.0:
+            return s
+        if f < 0.0:
+            lo = s
+        else:
+            hi = s
+        slope = 1.0 - math.cos(2.0 * math.pi * s)
+        nxt = s - f / slope if slope > 0.0 else 0.5 * (lo + hi)
+        if not lo < nxt < hi:
+            nxt = 0.5 * (lo + hi)
+        if nxt == s or hi - lo <= math.ulp(hi):
+            break
+        s = nxt
+    return s if abs(sine_progress(s) - target) <= abs(sine_progress(lo) - target) else lo
 
 
 @dataclass(frozen=True)
@@ -146,10 +176,9 @@ class Staircase:
         """Setpoint at time t [rad/s]; at a step time the new level (right-continuous)."""
         return self.levels[self.index(t)]
 
-    def values(self, t: np.ndarray) -> np.ndarray:
-        """Vectorised :meth:`value` [rad/s]."""
-        idx = np.searchsorted(np.asarray(self.step_times), np.asarray(t, dtype=float), side="right")
-        return np.asarray(self.levels)[idx]
+    def values(self, t: Iterable[float]) -> list[float]:
+        """:meth:`value` at each of the times ``t`` [rad/s], as a list."""
+        return [self.levels[bisect.bisect_right(self.step_times, float(x))] for x in t]
 
     def next_event_time(self, t: float) -> float:
         """First step time strictly after t [s], or +inf when none is left."""

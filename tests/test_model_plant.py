@@ -127,3 +127,40 @@ def test_ball_reaction_slows_the_rotor_by_the_ball_inertia():
     b = on.ball
     assert a_off / a_on == pytest.approx(1 + (b.m * b.l**2 + b.J) / on.J_abu, rel=1e-14)
     assert 0 < 1 - a_on / a_off < 1e-3
+
+
+def test_second_order_hold_stick_slip_time_is_the_closed_form_root():
+    """T(t) = J a t^2/2 in one long step: alpha = a t^2/2, omega = w0 + a t^3/6 (stick)."""
+    params = PlantParams(ball=BallParams(mu=2.75e-3))
+    b, J, a, w0 = params.ball, params.J_total, -4000.0, -20 * HZ
+    plant = AbuPlant(params, omega0=w0)
+    switches = plant.advance(1.0, 0.0, 0.0, J * a)
+    f = lambda t: b.lever_ratio * abs(a * t * t / 2) - b.mu * (w0 + a * t**3 / 6) ** 2
+    grid = np.linspace(1e-6, 1.0, 100001)
+    i = int(np.nonzero(f(grid) > 0)[0][0])
+    root = brentq(f, grid[i - 1], grid[i], xtol=1e-15)
+    assert switches[0].time == pytest.approx(root, abs=1e-12)
+    assert switches[0].to_mode == Mode.SLIP_POS
+
+
+@pytest.mark.parametrize("tau_motor, reaction", [(0.0, False), (0.005, False), (0.0, True)])
+def test_second_order_hold_equals_the_same_quadratic_in_sub_steps(tau_motor, reaction):
+    """One step with torque_accel = a equals 50 sub-steps fed with T, T' of the same quadratic
+    (stick, the slip that follows and the re-stick go through all three integrators)."""
+    params = PlantParams(ball=BallParams(mu=2e-3), tau_motor=tau_motor, ball_reaction=reaction)
+    J = params.J_total
+    T0, r, a, h = J * -40.0, J * -900.0, J * 6000.0, 0.2
+    whole = AbuPlant(params, omega0=-15 * HZ)
+    parts = AbuPlant(params, omega0=-15 * HZ)
+    sw_whole = whole.advance(h, T0, r, a)
+    sw_parts, n = [], 50
+    for i in range(n):
+        t = i * h / n
+        sw_parts += parts.advance(h / n, T0 + r * t + a * t * t / 2, r + a * t, a)
+    assert len(sw_whole) == len(sw_parts) >= 1
+    for x, y in zip(sw_whole, sw_parts):
+        assert (x.from_mode, x.to_mode) == (y.from_mode, y.to_mode)
+        assert x.time == pytest.approx(y.time, abs=1e-11)
+    for name in ("theta", "omega", "beta", "beta_dot", "torque_applied"):
+        assert getattr(whole.state, name) == pytest.approx(getattr(parts.state, name),
+                                                           rel=1e-9, abs=1e-12)

@@ -1,0 +1,199 @@
+"""Small standard-library numerics for the stepped plant (no numpy, no scipy).
+
+The FMUs run in any Python the host embeds, so the plant's per-step work is done here:
+
+* :func:`poly_eval`, :func:`poly_first_negative`: the first point of [0, span] after which a
+  polynomial (ascending coefficients, degree <= 6 in practice) turns negative. A cheap lower
+  bound (c0 + sum of the negative terms at span) rules out a sign change before any root is
+  looked for; otherwise the polynomial is split into monotone pieces at the real roots of its
+  derivative (recursively) and the first piece that crosses zero is solved to full precision.
+* :func:`brent_root`: a bracketing root finder (bisection safeguarded secant) to the last ulp.
+* :func:`rk45_step`: one Dormand-Prince 5(4) step (the pair of ``scipy.integrate.RK45``) with
+  its error estimate; :func:`integrate_until` drives it with step-size control and locates a
+  sign change of an event function by re-stepping from the last accepted point.
+
+Measured against the scipy versions they replace in ``benchmarks/bench_plant.py``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Sequence
+
+Vector = list
+
+# Dormand-Prince 5(4): nodes, stage matrix, 5th-order weights and error weights (b5 - b4).
+_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
+_A = ((),
+      (1 / 5,),
+      (3 / 40, 9 / 40),
+      (44 / 45, -56 / 15, 32 / 9),
+      (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+      (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656))
+_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
+_E = (-71 / 57600, 0.0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40)
+
+
+def poly_eval(c: Sequence[float], x: float) -> float:
+    """Value of sum c[i] x^i (Horner)."""
+    value = 0.0
+    for coefficient in reversed(c):
+        value = value * x + coefficient
+    return value
+
+
+def poly_der(c: Sequence[float]) -> list[float]:
+    """Coefficients of the derivative (ascending)."""
+    return [i * c[i] for i in range(1, len(c))]
+
+
+def _trim(c: Sequence[float]) -> list[float]:
+    c = list(c)
+    while c and c[-1] == 0.0:
+        c.pop()
+    return c
+
+
+def brent_root(f: Callable[[float], float], a: float, b: float, fa: float | None = None,
+               fb: float | None = None, max_iter: int = 200) -> float:
+    """A root of f in [a, b] where f(a), f(b) have opposite signs (or one is 0), to ~1 ulp.
+
+    Secant steps kept inside the bracket, bisection when they do not shrink it fast enough.
+    """
+    fa = f(a) if fa is None else fa
+    fb = f(b) if fb is None else fb
+    if fa == 0.0:
+        return a
+    if fb == 0.0:
+        return b
+    width = abs(b - a)
+    for _ in range(max_iter):
+        x = b - fb * (b - a) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        lo, hi = (a, b) if a < b else (b, a)
+        if not (lo < x < hi) or abs(b - a) > 0.5 * width:
+            x = 0.5 * (a + b)  # bisect: the secant left the bracket or stalls
+        width = abs(b - a)
+        if x == a or x == b:
+            break
+        fx = f(x)
+        if fx == 0.0:
+            return x
+        if (fx < 0.0) == (fa < 0.0):
+            a, fa = x, fx
+        else:
+            b, fb = x, fx
+        if abs(b - a) <= 2.0 * math.ulp(max(abs(a), abs(b))):
+            break
+    return a if abs(fa) < abs(fb) else b
+
+
+def _real_roots(c: list[float], lo: float, hi: float) -> list[float]:
+    """Sorted real roots of the polynomial c in (lo, hi) (sign changes only, recursive)."""
+    c = _trim(c)
+    if len(c) <= 1:
+        return []
+    if len(c) == 2:
+        x = -c[0] / c[1]
+        return [x] if lo < x < hi else []
+    points = [lo] + _real_roots(poly_der(c), lo, hi) + [hi]
+    roots = []
+    f = lambda x: poly_eval(c, x)  # noqa: E731 - tiny closure for brent_root
+    for a, b in zip(points[:-1], points[1:]):
+        fa, fb = f(a), f(b)
+        if (fa < 0.0) != (fb < 0.0) and b > a:
+            x = brent_root(f, a, b, fa, fb)
+            if lo < x < hi:
+                roots.append(x)
+    return roots
+
+
+def poly_first_negative(c: Sequence[float], span: float, end_tolerance: float) -> float | None:
+    """First u in [0, span] after which the polynomial c (ascending) turns negative, or None.
+
+    Returns 0 if c is negative at 0. A crossing within ``end_tolerance`` beyond ``span`` is
+    returned as ``span``.
+    """
+    c = _trim(c)
+    if not c:
+        return None
+    if c[0] < 0.0:
+        return 0.0
+    if len(c) == 1:
+        return None
+    limit = span + end_tolerance
+    # Cheap bound: on [0, limit] c(u) >= c0 + sum of the negative terms at u = limit.
+    bound = c[0]
+    power = 1.0
+    for coefficient in c[1:]:
+        power *= limit
+        if coefficient < 0.0:
+            bound += coefficient * power
+    if bound > 0.0:
+        return None
+    points = [0.0] + _real_roots(c, 0.0, limit) + [limit]
+    for a, b in zip(points[:-1], points[1:]):
+        if b > a and poly_eval(c, 0.5 * (a + b)) < 0.0:
+            return min(a, span)
+    return None
+
+
+def rk45_step(f: Callable[[float, Vector], Vector], t: float, y: Vector, h: float,
+              k0: Vector | None = None) -> tuple[Vector, Vector, Vector]:
+    """One Dormand-Prince 5(4) step: (y(t + h), error estimate, f at t + h)."""
+    n = len(y)
+    k = [f(t, y) if k0 is None else k0]
+    for i in range(1, 6):
+        a = _A[i]
+        yi = [y[j] + h * sum(a[s] * k[s][j] for s in range(i)) for j in range(n)]
+        k.append(f(t + _C[i] * h, yi))
+    y_new = [y[j] + h * sum(_B[s] * k[s][j] for s in range(6)) for j in range(n)]
+    k.append(f(t + h, y_new))
+    err = [h * sum(_E[s] * k[s][j] for s in range(7)) for j in range(n)]
+    return y_new, err, k[6]
+
+
+def _error_norm(err: Vector, y0: Vector, y1: Vector, rtol: float, atol: Sequence[float]) -> float:
+    return max(abs(e) / (atol[j] + rtol * max(abs(y0[j]), abs(y1[j])))
+               for j, e in enumerate(err))
+
+
+def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector, t_end: float,
+                    rtol: float, atol: Sequence[float],
+                    event: Callable[[float, Vector], float] | None = None,
+                    max_steps: int = 100000) -> tuple[float, Vector, bool]:
+    """Integrate y' = f(t, y) from t0 to t_end, stopping where ``event`` falls to <= 0.
+
+    ``event`` must be > 0 at t0. Returns (t, y, stopped): the event time and state if it
+    fell, else t_end and y(t_end). The event time is located by re-stepping from the last
+    accepted point with the step as the unknown (a bracketing root finder on one RK step),
+    so it is as accurate as the steps themselves.
+    """
+    t, y = t0, list(y0)
+    k = f(t, y)
+    h = t_end - t0
+    for _ in range(max_steps):
+        if t >= t_end:
+            return t_end, y, False
+        h = min(h, t_end - t)
+        y_new, err, k_new = rk45_step(f, t, y, h, k)
+        norm = _error_norm(err, y, y_new, rtol, atol)
+        if not math.isfinite(norm):
+            h *= 0.2
+            if h <= 1e-18:
+                raise ArithmeticError(f"non-finite derivative at t = {t!r}")
+            continue
+        if norm > 1.0:
+            h *= max(0.2, 0.9 * norm ** -0.2)
+            if h <= 4.0 * math.ulp(max(abs(t), 1.0)):
+                raise ArithmeticError(f"step size underflow at t = {t!r}")
+            continue
+        if event is not None and event(t + h, y_new) <= 0.0:
+            def g(step: float) -> float:
+                return event(t + step, rk45_step(f, t, y, step, k)[0])
+            step = brent_root(g, 0.0, h, event(t, y), event(t + h, y_new))
+            if step <= 0.0:
+                return t, y, True
+            return t + step, rk45_step(f, t, y, step, k)[0], True
+        t = t_end if h == t_end - t else t + h
+        y, k = y_new, k_new
+        h *= min(5.0, 0.9 * norm ** -0.2) if norm > 0.0 else 5.0
+    raise ArithmeticError(f"more than {max_steps} integration steps")
