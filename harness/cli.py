@@ -175,6 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     from measurement.cli import register
     register(sub)
+    from .cli_export import register as register_export
+    register_export(sub)
     return parser
 
 
