@@ -337,3 +337,22 @@ def write_ssp(out: str | os.PathLike, components: Sequence[ComponentLike],
                 # FMUs are zip archives already: store them uncompressed
                 zf.write(files[comp_name], source, compress_type=zipfile.ZIP_STORED)
     return out_path
+
+
+def read_default_experiment(ssp: str | os.PathLike) -> Experiment:
+    """Start, stop and fixed step [s] of an SSP archive's default experiment.
+
+    fmpy's ``simulate_ssp`` ignores ``DefaultExperiment``; pass these to it.
+    """
+    path = Path(ssp)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read(SSD_NAME))
+        default = root.find("ssd:DefaultExperiment", NS)
+        fixed = default.find("ssd:Annotations/ssc:Annotation/osp:Algorithm/"
+                             "osp:FixedStepAlgorithm", NS)
+        return Experiment(float(default.get("startTime", "0")), float(default.get("stopTime")),
+                          float(fixed.get("baseStepSize")))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, AttributeError,
+            TypeError, ValueError) as exc:
+        raise SspError(f"{path}: no SSP default experiment with a fixed step ({exc})") from None
