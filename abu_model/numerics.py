@@ -162,7 +162,8 @@ def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector,
                     max_steps: int = 100000) -> tuple[float, Vector, bool]:
     """Integrate y' = f(t, y) from t0 to t_end, stopping where ``event`` falls to <= 0.
 
-    ``event`` must be > 0 at t0. Returns (t, y, stopped): the event time and state if it
+    Only a fall from > 0 counts (like an event of direction -1): an event that starts at 0,
+    e.g. beta' = 0 at the start of a slip, fires once it has become positive. Returns (t, y, stopped): the event time and state if it
     fell, else t_end and y(t_end). The event time is located by re-stepping from the last
     accepted point with the step as the unknown (a bracketing root finder on one RK step),
     so it is as accurate as the steps themselves.
@@ -170,6 +171,7 @@ def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector,
     t, y = t0, list(y0)
     k = f(t, y)
     h = t_end - t0
+    g_prev = event(t, y) if event is not None else 0.0
     for _ in range(max_steps):
         if t >= t_end:
             return t_end, y, False
@@ -186,13 +188,15 @@ def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector,
             if h <= 4.0 * math.ulp(max(abs(t), 1.0)):
                 raise ArithmeticError(f"step size underflow at t = {t!r}")
             continue
-        if event is not None and event(t + h, y_new) <= 0.0:
+        g_new = event(t + h, y_new) if event is not None else 0.0
+        if event is not None and g_prev > 0.0 and g_new <= 0.0:
             def g(step: float) -> float:
                 return event(t + step, rk45_step(f, t, y, step, k)[0])
-            step = brent_root(g, 0.0, h, event(t, y), event(t + h, y_new))
+            step = brent_root(g, 0.0, h, g_prev, g_new)
             if step <= 0.0:
                 return t, y, True
             return t + step, rk45_step(f, t, y, step, k)[0], True
+        g_prev = g_new
         t = t_end if h == t_end - t else t + h
         y, k = y_new, k_new
         h *= min(5.0, 0.9 * norm ** -0.2) if norm > 0.0 else 5.0

@@ -145,3 +145,33 @@ class PlantParams:
         """
         b = self.ball
         return self.J_abu + (b.m * b.l**2 + b.J if self.ball_reaction else 0.0)
+
+
+def check_record(record: Any, kinds: dict[str, str], what: str) -> dict[str, Any]:
+    """Validate a saved record (a dict, e.g. an FMU state read back from JSON).
+
+    ``kinds`` maps each required key to ``"real"`` (finite float), ``"extended"`` (float,
+    +-inf allowed, not NaN), ``"int"`` or ``"bool"``. Returns a new dict with exactly those
+    keys and normalised types; raises ``ValueError`` naming the first bad key.
+    """
+    if not isinstance(record, dict):
+        raise ValueError(f"{what}: expected a mapping, got {type(record).__name__}")
+    out: dict[str, Any] = {}
+    for key, kind in kinds.items():
+        if key not in record:
+            raise ValueError(f"{what}: '{key}' is missing")
+        value = record[key]
+        if kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{what}: '{key}' = {value!r} is not a boolean")
+        elif kind == "int":
+            if isinstance(value, bool) or not isinstance(value, int) or abs(value) > 2**31 - 1:
+                raise ValueError(f"{what}: '{key}' = {value!r} is not a 32-bit integer")
+        else:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{what}: '{key}' = {value!r} is not a number")
+            value = float(value)
+            if math.isnan(value) or (kind == "real" and math.isinf(value)):
+                raise ValueError(f"{what}: '{key}' = {value!r} is not a finite number")
+        out[key] = value
+    return out

@@ -314,7 +314,7 @@ class AbuPlant:
         atol = (1e-14, 1e-12, 1e-14, 1e-12, 1e-13 * scale_torque)
         try:
             tau, y, stopped = integrate_until(rhs, tau0, y0, h, SLIP_RTOL, atol, stops)
-            if not stopped:  # a stop within END_TOLERANCE after the step end is taken at h
+            if not stopped and stops(h, y) > 0.0:  # a stop within END_TOLERANCE after h
                 y_late = rk45_step(rhs, h, y, END_TOLERANCE)[0]
                 stopped = stops(h + END_TOLERANCE, y_late) <= 0.0
         except ArithmeticError as exc:

@@ -3,10 +3,11 @@
 Built by ``fmus.build`` into ``AbuBall.fmu`` as module ``abufmu_abuball``; ``abu_model``
 travels inside the FMU as ``abuball_abu_model`` (the build rewrites the imports below).
 
-Inputs: the commanded torque held to first order inside a step,
-T(tau) = torque + torque_rate * tau (pythonfmu has no fmi2SetRealInputDerivatives, so the rate
-is an explicit input; connect the SpeedController's ``torque_rate`` to it, or leave it 0 for a
-zero-order hold). ``do_step`` calls ``AbuPlant.advance``, which locates every stick/slip switch
+Inputs: the commanded torque held to first or second order inside a step,
+T(tau) = torque + torque_rate tau + torque_accel tau^2/2 (the FMU has no
+fmi2SetRealInputDerivatives, so the rates are explicit inputs; connect the SpeedController's
+``torque_rate`` to it, or leave both 0 for a zero-order hold; ``torque_accel`` is optional,
+default 0, and registered last so that the other value references keep their numbers). ``do_step`` calls ``AbuPlant.advance``, which locates every stick/slip switch
 inside the step exactly; the outputs report them (``switch_count``, ``t_last_switch``,
 ``step_switches``, ``t_first_step_switch``) so that a master can roll back and land a
 communication point on the first switch.
@@ -19,15 +20,14 @@ Switch times are reported as ``NO_SWITCH`` = -1e30 s while there is none.
 from __future__ import annotations
 
 import math
-import sys
-from dataclasses import asdict, fields
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
-from abu_model.params import DEFAULT_J_ABU, BallParams, PlantParams, check_finite
-from abu_model.plant import AbuPlant, PlantOutputs, PlantState
+from abu_model.dynamics import accelerations
+from abu_model.params import DEFAULT_J_ABU, BallParams, PlantParams, check_finite, check_record
+from abu_model.plant import STATE_FIELDS, AbuPlant, Mode, PlantOutputs, PlantState
 
 #: Reported for switch times when there is no switch (before the first one, or none in the
 #: last step) [s].
@@ -35,23 +35,16 @@ NO_SWITCH = -1e30
 #: Relative mismatch tolerated between the master's current time and the FMU's time [-].
 TIME_TOLERANCE = 1e-9
 
-#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
-#: references to the slave instance, its log queue and its class twice after a Python exception
-#: (in its exception handler and again in fmi2FreeInstance); spare references make that
-#: harmless, so a master that frees the failed instance does not crash the process.
-_FAILED: list = []
-
 _BALL = ("m", "d", "l", "mu", "mu_d")
 _PARAMETERS = _BALL + ("J_abu", "tau_motor", "ball_reaction", "theta0", "omega0", "beta0",
                        "beta_dot0")
-_INPUTS = ("torque", "torque_rate")
+_INPUTS = ("torque", "torque_rate", "torque_accel")
 
-
-def _plant_state_from_dict(values: dict) -> PlantState:
-    """PlantState from a (possibly JSON round-tripped) dict, with each field's type."""
-    default = PlantState()
-    return PlantState(**{f.name: type(getattr(default, f.name))(values[f.name])
-                         for f in fields(PlantState)})
+#: Kinds of the saved state's entries (see ``check_record``).
+_STATE_KINDS = {**{name: "real" for name in _PARAMETERS + _INPUTS}, "ball_reaction": "bool",
+                "start_time": "real", "step_switches": "int", "t_first_step_switch": "real"}
+_PLANT_KINDS = {**{name: "real" for name in STATE_FIELDS}, "mode": "int",
+                "switch_count": "int", "t_last_switch": "extended"}
 
 
 class AbuBall(Fmi2Slave):
@@ -66,15 +59,17 @@ class AbuBall(Fmi2Slave):
     UNITS = {
         "m": "kg", "d": "m", "l": "m", "mu": "1", "mu_d": "1", "J_abu": "kg.m2",
         "tau_motor": "s", "theta0": "rad", "omega0": "rad/s", "beta0": "rad", "beta_dot0": "rad/s",
-        "torque": "N.m", "torque_rate": "N.m/s",
+        "torque": "N.m", "torque_rate": "N.m/s", "torque_accel": "N.m/s2",
         "theta": "rad", "omega": "rad/s", "alpha": "rad/s2", "beta": "rad", "beta_dot": "rad/s",
         "beta_ddot": "rad/s2", "normal_force": "N", "friction_force": "N", "mu_req": "1",
         "torque_applied": "N.m", "t_last_switch": "s", "t_first_step_switch": "s",
+        "jerk": "rad/s3",
     }
     OUTPUT_DEPENDENCIES = {
         "theta": (), "omega": (), "beta": (), "beta_dot": (), "normal_force": (),
         "alpha": ("torque",), "beta_ddot": ("torque",), "friction_force": ("torque",),
         "mu_req": ("torque",), "torque_applied": ("torque",),
+        "jerk": ("torque", "torque_rate"),
         "mode": (), "switch_count": (), "t_last_switch": (), "step_switches": (),
         "t_first_step_switch": (),
     }
@@ -93,6 +88,7 @@ class AbuBall(Fmi2Slave):
         self.beta_dot0 = 0.0
         self.torque = 0.0
         self.torque_rate = 0.0
+        self.torque_accel = 0.0
         # Internal state besides the plant's.
         self.start_time = 0.0
         self.step_switches = 0
@@ -149,6 +145,10 @@ class AbuBall(Fmi2Slave):
         self.register_variable(Real(
             "torque_applied", description="torque acting on the rotor (after the motor lag) [N m]",
             getter=self._torque_applied, **out))
+        self.register_variable(Real(
+            "jerk", description="d(alpha)/dt for the current torque inputs [rad/s3] (for a "
+                                "second-order hold of the controller's torque)",
+            getter=self._jerk, **out))
         discrete = dict(causality=Fmi2Causality.output, variability=Fmi2Variability.discrete)
         self.register_variable(Integer("mode", description="-1 slip with beta_dot < 0, 0 stick, "
                                        "1 slip with beta_dot > 0", getter=lambda: self._int_state("mode"), **discrete))
@@ -160,6 +160,10 @@ class AbuBall(Fmi2Slave):
                                        "last do_step", **discrete))
         self.register_variable(Real("t_first_step_switch", description="time of the first switch "
                                     "inside the last do_step, -1e30 if none [s]", **out))
+        # Registered last: the value references above stay those of earlier versions.
+        self.register_variable(Real("torque_accel", description="second derivative of the "
+                                    "commanded torque inside a step (second-order hold, "
+                                    "optional) [N m/s2]", **inp))
 
     # ----------------------------------------------------------------- model
     def _plant_params(self) -> PlantParams:
@@ -208,6 +212,24 @@ class AbuBall(Fmi2Slave):
         outputs = self._outputs()
         return math.nan if outputs is None else getattr(outputs, name)
 
+    def _jerk(self) -> float:
+        """d(alpha)/dt now [rad/s3]: a central difference along the trajectory (exact up to
+        rounding for the report's model, where alpha = T/J_abu is linear in the torque)."""
+        plant = self._current_plant()
+        if plant is None:
+            return math.nan
+        p, s = plant.params, plant.state
+        applied = plant.applied_torque(self.torque)
+        d_applied = (self.torque_rate if p.tau_motor == 0.0
+                     else (self.torque - applied) / p.tau_motor)
+        acc = accelerations(p, applied, s.omega, s.beta_dot, s.mode)
+        eps = 1e-6  # [s]
+
+        def alpha_at(e: float) -> float:
+            return accelerations(p, applied + d_applied * e, s.omega + acc.alpha * e,
+                                 s.beta_dot + acc.beta_ddot * e, s.mode).alpha
+        return (alpha_at(eps) - alpha_at(-eps)) / (2.0 * eps)
+
     def _torque_applied(self) -> float:
         plant = self._current_plant()
         return math.nan if plant is None else plant.applied_torque(self.torque)
@@ -221,16 +243,10 @@ class AbuBall(Fmi2Slave):
         self.start_time = float(start_time)
 
     def exit_initialization_mode(self):
-        try:
-            for name in ("torque", "torque_rate"):
-                check_finite(name, getattr(self, name), "a finite start value")
-            self._plant = self._new_plant()
-        except ValueError as exc:  # ParameterError is a ValueError
-            message = f"AbuBall '{self.instance_name}': {exc}"
-            self.log(message, Fmi2Status.error)
-            print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            _FAILED.extend((self, self, self.log_queue, type(self)))
-            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
+        # A ParameterError (a ValueError) names the parameter; the runtime returns fmi2Error.
+        for name in _INPUTS:
+            check_finite(name, getattr(self, name), "a finite start value")
+        self._plant = self._new_plant()
         self._cache = None
         self.step_switches, self.t_first_step_switch = 0, NO_SWITCH
 
@@ -250,7 +266,7 @@ class AbuBall(Fmi2Slave):
         saved = plant.get_state()
         plant.state.time = current_time  # follow the master's clock through rounding
         try:
-            switches = plant.advance(step_size, self.torque, self.torque_rate)
+            switches = plant.advance(step_size, self.torque, self.torque_rate, self.torque_accel)
         except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
             plant.set_state(saved)  # fmi2Discard: nothing advanced
             self.log(f"AbuBall '{self.instance_name}': step [{current_time!r}, "
@@ -267,8 +283,32 @@ class AbuBall(Fmi2Slave):
         state = {name: getattr(self, name) for name in _PARAMETERS + _INPUTS}
         state.update(start_time=self.start_time, step_switches=self.step_switches,
                      t_first_step_switch=self.t_first_step_switch,
-                     plant=None if self._plant is None else asdict(self._plant.state))
+                     plant=None if self._plant is None else self._plant.state.as_tuple())
         return state
+
+    @staticmethod
+    def _validate_fmu_state(state, before_initialization: bool) -> dict:
+        """A checked copy of a saved state (ValueError if anything is missing or malformed)."""
+        checked = check_record(state, _STATE_KINDS, "AbuBall state")
+        plant = state.get("plant")
+        if plant is None:
+            if not before_initialization:
+                raise ValueError("AbuBall state: an initialized instance needs its 'plant' state")
+        else:
+            if not isinstance(plant, (list, tuple)) or len(plant) != len(STATE_FIELDS):
+                raise ValueError(f"AbuBall state: 'plant' must hold {len(STATE_FIELDS)} numbers")
+            values = check_record(dict(zip(STATE_FIELDS, plant)), _PLANT_KINDS, "AbuBall plant state")
+            if values["mode"] not in (Mode.SLIP_NEG, Mode.STICK, Mode.SLIP_POS):
+                raise ValueError(f"AbuBall plant state: mode = {values['mode']} is not -1, 0 or 1")
+            if values["switch_count"] < 0 or values["t_last_switch"] == math.inf:
+                raise ValueError("AbuBall plant state: bad switch bookkeeping")
+            PlantParams(BallParams(checked["m"], checked["d"], checked["l"], checked["mu"],
+                                   None if checked["mu_d"] < 0.0 else checked["mu_d"]),
+                        checked["J_abu"], checked["tau_motor"], checked["ball_reaction"])
+            checked["plant"] = tuple(values[name] for name in STATE_FIELDS)
+        if plant is None:
+            checked["plant"] = None
+        return checked
 
     def _set_fmu_state(self, state):
         for name in _PARAMETERS + _INPUTS:
@@ -282,4 +322,4 @@ class AbuBall(Fmi2Slave):
             return
         if self._plant is None or self._plant.params != self._plant_params():
             self._plant = self._new_plant()
-        self._plant.set_state(_plant_state_from_dict(state["plant"]))
+        self._plant.set_state(PlantState(*state["plant"]))

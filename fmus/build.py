@@ -19,13 +19,13 @@ from __future__ import annotations
 import ast
 import importlib
 import re
-import shutil
 import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
+from .assemble import assemble_fmu, vendor_pythonfmu
 from .model_description import FmuBuildError, InterfaceSpec, rewrite_fmu_model_description
 
 HERE = Path(__file__).resolve().parent
@@ -88,19 +88,62 @@ def _package_dir(package: str) -> Path:
 
 
 def _absolute_project_imports(tree: ast.AST) -> list[tuple[ast.stmt, str]]:
-    """(import node, top-level project package) for every absolute import of a project package."""
+    """(import node, top-level package) for every absolute import of a project package or of
+    pythonfmu (whose runtime part is vendored too)."""
     found = []
+    vendorable = PROJECT_PACKAGES + ("pythonfmu",)
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 top = alias.name.split(".")[0]
-                if top in PROJECT_PACKAGES:
+                if top in vendorable:
                     found.append((node, top))
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             top = node.module.split(".")[0]
-            if top in PROJECT_PACKAGES:
+            if top in vendorable:
                 found.append((node, top))
     return found
+
+
+def module_closure(script: Path, packages: Mapping[str, Path]) -> dict[str, set[Path]]:
+    """The files of each project package that ``script`` needs, following its imports.
+
+    Absolute imports of a package in ``packages`` (name -> folder) and relative imports inside
+    those packages are followed; every package's ``__init__.py`` is included.
+    """
+    needed: dict[str, set[Path]] = {name: {folder / "__init__.py"} for name, folder in packages.items()}
+    todo, seen = [script, *(f for files in needed.values() for f in files)], set()
+
+    def add(package: str, parts: list[str]) -> None:
+        base = packages[package].joinpath(*parts)
+        for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+            if candidate.is_file():
+                needed[package].add(candidate)
+                todo.append(candidate)
+
+    while todo:
+        file = todo.pop()
+        if file in seen:
+            continue
+        seen.add(file)
+        owner = next((name for name, folder in packages.items() if folder in file.parents), None)
+        for node in ast.walk(ast.parse(file.read_text(encoding="utf-8"), filename=str(file))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level == 0 and node.module and node.module.split(".")[0] in packages:
+                    package, parts = node.module.split(".")[0], node.module.split(".")[1:]
+                elif node.level == 1 and owner is not None:
+                    package, parts = owner, (node.module or "").split(".") if node.module else []
+                else:
+                    continue
+                add(package, parts)
+                for alias in node.names:  # "from pkg import module"
+                    add(package, [*parts, alias.name])
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    top, *parts = alias.name.split(".")
+                    if top in packages:
+                        add(top, parts)
+    return needed
 
 
 def rewrite_imports(source: str, renames: Mapping[str, str], filename: str = "<source>") -> str:
@@ -137,12 +180,14 @@ def rewrite_imports(source: str, renames: Mapping[str, str], filename: str = "<s
     return result
 
 
-def vendor_package(src: Path, dest: Path, renames: Mapping[str, str]) -> None:
-    """Copy the package folder ``src`` (its .py files) to ``dest``, rewriting project imports."""
+def vendor_package(src: Path, dest: Path, renames: Mapping[str, str],
+                   only: set[Path] | None = None) -> None:
+    """Copy the package folder ``src`` (its .py files, or those in ``only``) to ``dest``,
+    rewriting project imports."""
     if not (src / "__init__.py").is_file():
         raise FmuBuildError(f"{src}: not a Python package (no __init__.py)")
     for file in sorted(src.rglob("*.py")):
-        if "__pycache__" in file.parts:
+        if "__pycache__" in file.parts or (only is not None and file not in only):
             continue
         target = dest / file.relative_to(src)
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -159,31 +204,45 @@ def _forget_modules(names: list[str]) -> None:
 
 def _real_start_values(cls, resources: Path) -> dict[str, float]:
     """Start values of the Real parameters and inputs of a fresh slave instance."""
-    from pythonfmu import Fmi2Causality, Real
-
     instance = cls(instance_name="build", resources=str(resources))
     return {v.name: float(v.getter()) for v in instance.vars.values()
-            if isinstance(v, Real) and v.causality in (Fmi2Causality.parameter,
-                                                       Fmi2Causality.input)}
+            if type(v).__name__ == "Real" and v.causality.name in ("parameter", "input")}
+
+
+def _slave_class(module_name: str, class_name: str | None):
+    """The slave class of the staged module (the named one, else the only Fmi2Slave subclass)."""
+    module = importlib.import_module(module_name)
+    candidates = [obj for obj in vars(module).values()
+                  if isinstance(obj, type) and obj.__module__ == module_name
+                  and any(base.__name__ == "Fmi2Slave" for base in obj.__mro__[1:])]
+    if class_name is not None:
+        candidates = [obj for obj in candidates if obj.__name__ == class_name]
+    if len(candidates) != 1:
+        raise FmuBuildError(f"{module_name}: expected one slave class"
+                            f"{f' named {class_name!r}' if class_name else ''}, found "
+                            f"{[c.__name__ for c in candidates]}")
+    return candidates[0]
 
 
 def build_slave_fmu(script: Path, module: str, vendored: Mapping[Path, str], target: Path,
                     class_name: str | None = None) -> Path:
-    """Build one FMU from a slave script with pythonfmu and fix its model description.
+    """Build one FMU from a slave script and fix its model description.
 
     Args:
         script: the slave script; its class defines ``UNITS`` and ``OUTPUT_DEPENDENCIES``.
         module: module name of the script inside the FMU.
-        vendored: source package folder -> package name inside the FMU.
+        vendored: source package folder -> package name inside the FMU; only the modules the
+            script needs (:func:`module_closure`) are copied.
         target: path of the FMU to write (atomically).
         class_name: expected slave class name (= model identifier), checked if given.
 
     Returns:
         ``target``.
     """
-    from pythonfmu.builder import FmuBuilder, get_model_class
-
+    pythonfmu_name = f"{module}_pythonfmu"
     renames = {src.name: name for src, name in vendored.items()}
+    renames["pythonfmu"] = pythonfmu_name
+    needed = module_closure(script, {src.name: src for src in vendored})
     with tempfile.TemporaryDirectory(prefix="abufmu_stage_") as tmp:
         stage = Path(tmp) / "stage"
         stage.mkdir()
@@ -191,26 +250,22 @@ def build_slave_fmu(script: Path, module: str, vendored: Mapping[Path, str], tar
         staged_script.write_text(
             rewrite_imports(script.read_text(encoding="utf-8"), renames, str(script)),
             encoding="utf-8")
-        project_files = []
         for src, name in vendored.items():
-            vendor_package(src, stage / name, renames)
-            project_files.append(stage / name)
-        forget = [module, *vendored.values()]
+            vendor_package(src, stage / name, renames, needed[src.name])
+        vendor_pythonfmu(stage / pythonfmu_name)
+        forget = [module, pythonfmu_name, *vendored.values()]
         _forget_modules(forget)
         importlib.invalidate_caches()
+        sys.path.insert(0, str(stage))
         try:
-            raw = FmuBuilder.build_FMU(staged_script, dest=Path(tmp) / "raw",
-                                       project_files=project_files, **FMU_OPTIONS)
-            cls = get_model_class(staged_script)
-            if class_name is not None and cls.__name__ != class_name:
-                raise FmuBuildError(f"{script}: slave class is '{cls.__name__}', "
-                                    f"expected '{class_name}'")
+            cls = _slave_class(module, class_name)
             try:
                 units, deps = dict(cls.UNITS), dict(cls.OUTPUT_DEPENDENCIES)
             except AttributeError as exc:
                 raise FmuBuildError(f"{script}: the slave class must define UNITS and "
                                     f"OUTPUT_DEPENDENCIES ({exc})") from None
             spec = InterfaceSpec(units, deps, _real_start_values(cls, stage))
+            raw = assemble_fmu(stage, module, cls, FMU_OPTIONS, Path(tmp) / "raw.fmu")
             return rewrite_fmu_model_description(raw, target, spec)
         finally:
             _forget_modules(forget)

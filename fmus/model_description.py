@@ -39,9 +39,11 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
     "rad/s2": {"rad": 1, "s": -2},
+    "rad/s3": {"rad": 1, "s": -3},
     "N": {"kg": 1, "m": 1, "s": -2},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "N.m/s": {"kg": 1, "m": 2, "s": -3},
+    "N.m/s2": {"kg": 1, "m": 2, "s": -4},
     "kg.m2": {"kg": 1, "m": 2},
 }
 

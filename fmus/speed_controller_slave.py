@@ -18,23 +18,17 @@ read, so after new inputs are set at a communication point they are the right-ha
 from __future__ import annotations
 
 import math
-import sys
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
 from abu_model.errors import ParameterError
+from abu_model.params import check_record
 from controller.pi import THETA_REF_MODES, PISpeedController
 
-#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
-#: references to the slave instance, its log queue and its class twice after a Python exception
-#: (in its exception handler and again in fmi2FreeInstance); spare references make that
-#: harmless, so a master that frees the failed instance does not crash the process.
-_FAILED: list = []
-
 _PARAMETERS = ("zeta", "omega_n", "J_abu", "theta_ref_mode", "x_I0")
-_INPUTS = ("omega_ref", "omega", "theta", "alpha")
+_INPUTS = ("omega_ref", "omega", "theta", "alpha", "jerk")
 
 
 class SpeedController(Fmi2Slave):
@@ -49,11 +43,13 @@ class SpeedController(Fmi2Slave):
     UNITS = {
         "zeta": "1", "omega_n": "rad/s", "J_abu": "kg.m2", "x_I0": "rad",
         "omega_ref": "rad/s", "omega": "rad/s", "theta": "rad", "alpha": "rad/s2",
-        "torque": "N.m", "torque_rate": "N.m/s", "x_I": "rad",
+        "torque": "N.m", "torque_rate": "N.m/s", "x_I": "rad", "jerk": "rad/s3",
+        "torque_accel": "N.m/s2",
     }
     OUTPUT_DEPENDENCIES = {
         "torque": ("omega_ref", "omega", "theta"),
         "torque_rate": ("omega_ref", "omega", "alpha"),
+        "torque_accel": ("alpha", "jerk"),
         "x_I": (),
     }
 
@@ -68,6 +64,7 @@ class SpeedController(Fmi2Slave):
         self.omega = 0.0
         self.theta = 0.0
         self.alpha = 0.0
+        self.jerk = 0.0
         # Internal state.
         self.time = 0.0
         self.x_I = 0.0
@@ -86,12 +83,17 @@ class SpeedController(Fmi2Slave):
         self.register_variable(Real("omega", description="measured ABU speed [rad/s]", **inp))
         self.register_variable(Real("theta", description="ABU angle (used in thesis mode) [rad]", **inp))
         self.register_variable(Real("alpha", description="ABU acceleration, for torque_rate and the integrator [rad/s2]", **inp))
+        self.register_variable(Real("jerk", description="ABU jerk d(alpha)/dt, for torque_accel and "
+                                    "the integrator (second-order hold; 0: first-order) [rad/s3]", **inp))
         out = dict(causality=Fmi2Causality.output)
         self.register_variable(Real("torque", description="commanded motor torque [N m]",
                                     getter=self._torque, **out))
         self.register_variable(Real("torque_rate", description="time derivative of the commanded torque "
                                     "between setpoint steps, -Kp alpha + Ki (omega_ref - omega) [N m/s]",
                                     getter=self._torque_rate, **out))
+        self.register_variable(Real("torque_accel", description="second time derivative of the commanded "
+                                    "torque between setpoint steps, -Kp jerk - Ki alpha [N m/s2]",
+                                    getter=self._torque_accel, **out))
         self.register_variable(Real("x_I", description="integrator state (integral of omega_ref - omega) [rad]",
                                     getter=lambda: self.x_I, **out))
 
@@ -127,19 +129,17 @@ class SpeedController(Fmi2Slave):
         law = self._current_law()
         return math.nan if law is None else law.torque_rate(self.omega_ref, self.omega, self.alpha)
 
+    def _torque_accel(self) -> float:
+        law = self._current_law()
+        return math.nan if law is None else -law.Kp * self.jerk - law.Ki * self.alpha
+
     # ----------------------------------------------------------------- FMI
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self.time = float(start_time)
 
     def exit_initialization_mode(self):
-        try:
-            self._law = self._build_law()
-        except ValueError as exc:  # ParameterError is a ValueError
-            message = f"SpeedController '{self.instance_name}': {exc}"
-            self.log(message, Fmi2Status.error)
-            print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            _FAILED.extend((self, self, self.log_queue, type(self)))
-            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
+        # A ParameterError (a ValueError) names the parameter; the runtime returns fmi2Error.
+        self._law = self._build_law()
         self.x_I = float(self.x_I0)
 
     def do_step(self, current_time, step_size):
@@ -149,7 +149,9 @@ class SpeedController(Fmi2Slave):
                 self.log(f"SpeedController '{self.instance_name}': input '{name}' = {value!r} "
                          f"at t = {current_time!r} s is not finite", Fmi2Status.error)
                 return False  # fmi2Discard: nothing advanced
-        self.x_I += self._law.integral_increment(step_size, self.omega_ref, self.omega, self.alpha)
+        # omega(tau) = omega + alpha tau + jerk tau^2/2 inside the step
+        self.x_I += (self._law.integral_increment(step_size, self.omega_ref, self.omega, self.alpha)
+                     - self.jerk * step_size ** 3 / 6.0)
         self.time = current_time + step_size
         return True
 
@@ -158,6 +160,16 @@ class SpeedController(Fmi2Slave):
         state = {name: getattr(self, name) for name in _PARAMETERS + _INPUTS}
         state.update(time=self.time, x_I=self.x_I, initialized=self._law is not None)
         return state
+
+    @staticmethod
+    def _validate_fmu_state(state, before_initialization: bool) -> dict:
+        """A checked copy of a saved state (ValueError if anything is missing or malformed)."""
+        kinds = {**{name: "real" for name in _PARAMETERS + _INPUTS}, "theta_ref_mode": "int",
+                 "time": "real", "x_I": "real", "initialized": "bool"}
+        checked = check_record(state, kinds, "SpeedController state")
+        if checked["initialized"] and checked["theta_ref_mode"] not in range(len(THETA_REF_MODES)):
+            raise ValueError(f"SpeedController state: theta_ref_mode = {checked['theta_ref_mode']}")
+        return checked
 
     def _set_fmu_state(self, state):
         for name in _PARAMETERS + _INPUTS:

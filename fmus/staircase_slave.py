@@ -15,25 +15,19 @@ Outputs (no inputs):
 from __future__ import annotations
 
 import math
-import sys
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
 from abu_model.errors import ParameterError
+from abu_model.params import check_record
 from controller.reference import ROUNDINGS, Staircase as StaircaseModel
 
 #: Reported for next_event_time when no setpoint step is left [s].
 NO_EVENT = 1e30
 #: Relative distance within which a step end is snapped onto a setpoint step time [-].
 EVENT_SNAP = 1e-12
-
-#: Objects kept alive forever after a failed initialization. pythonfmu 0.7 releases its
-#: references to the slave instance, its log queue and its class twice after a Python exception
-#: (in its exception handler and again in fmi2FreeInstance); spare references make that
-#: harmless, so a master that frees the failed instance does not crash the process.
-_FAILED: list = []
 
 _PARAMETERS = ("omega0", "omega_end", "t0", "te", "step", "rounding")
 
@@ -126,14 +120,8 @@ class Staircase(Fmi2Slave):
         self.time = float(start_time)
 
     def exit_initialization_mode(self):
-        try:
-            self._model = self._build_model()
-        except ValueError as exc:  # ParameterError is a ValueError
-            message = f"Staircase '{self.instance_name}': {exc}"
-            self.log(message, Fmi2Status.error)
-            print(message, file=sys.stderr)  # hosts without debug logging see nothing else
-            _FAILED.extend((self, self, self.log_queue, type(self)))
-            raise  # pythonfmu returns fmi2Fatal: the only non-OK status it can give here
+        # A ParameterError (a ValueError) names the parameter; the runtime returns fmi2Error.
+        self._model = self._build_model()
 
     def do_step(self, current_time, step_size):
         end = current_time + step_size
@@ -148,6 +136,13 @@ class Staircase(Fmi2Slave):
         state = {name: getattr(self, name) for name in _PARAMETERS}
         state.update(time=self.time, initialized=self._model is not None)
         return state
+
+    @staticmethod
+    def _validate_fmu_state(state, before_initialization: bool) -> dict:
+        """A checked copy of a saved state (ValueError if anything is missing or malformed)."""
+        kinds = {**{name: "real" for name in _PARAMETERS}, "rounding": "int", "time": "real",
+                 "initialized": "bool"}
+        return check_record(state, kinds, "Staircase state")
 
     def _set_fmu_state(self, state):
         for name in _PARAMETERS:
