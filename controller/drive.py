@@ -1,0 +1,192 @@
+"""The ``drive.json`` schema: an identified closed speed loop of the setup (stdlib only).
+
+``abu identify`` writes it; ``abu simulate``, ``abu render``, ``abu design``, ``abu next`` and
+``abu measure`` read it with ``--drive drive.json``. This module imports nothing outside the
+standard library (it may be vendored into an FMU), except the shared error type when present.
+
+The file is one JSON object (SI units, the unit in each key)::
+
+    {"kind": "abu-drive", "version": 1,
+     "model": "second-order" | "pi-lag" | "pi-lag-weighted",
+     "theta_ref_mode": "integral",
+     "zeta": 0.7, "omega_n_rad_s": 12.0, "tau_motor_s": 0.02, "setpoint_weight": 1.0,
+     "zeta_ci95": [lo, hi], "omega_n_rad_s_ci95": [lo, hi], ...   (optional)
+     "fit": {...}, "units": {...}, "source": "..."}                  (optional, informative)
+
+The loop is the PI law on the rotor (report eq. 4.5 read as a PI law, ``integral`` reading)
+with a first-order lag tau_motor between commanded and applied torque and a setpoint weight b
+on the proportional part:
+
+    T_cmd = Kp (b w_ref - w) + Ki integral(w_ref - w),  Kp = 2 zeta wn J,  Ki = wn^2 J,
+    tau_motor T' = T_cmd - T,  J w' = T,
+    w / w_ref = (2 zeta wn b s + wn^2) / (tau_motor s^3 + s^2 + 2 zeta wn s + wn^2).
+
+``second-order`` has tau_motor = 0 and b = 1 (the report's model), ``pi-lag`` b = 1.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+try:  # the shared error type; a vendored copy inside an FMU falls back to ValueError
+    from abu_model.errors import AbuError as _Base
+except ImportError:  # pragma: no cover - only without abu_model
+    _Base = ValueError  # type: ignore[assignment,misc]
+
+KIND = "abu-drive"
+VERSION = 1
+MODELS = ("second-order", "pi-lag", "pi-lag-weighted")
+#: Fitted parameters of each model (names as in the file).
+MODEL_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "second-order": ("zeta", "omega_n_rad_s"),
+    "pi-lag": ("zeta", "omega_n_rad_s", "tau_motor_s"),
+    "pi-lag-weighted": ("zeta", "omega_n_rad_s", "tau_motor_s", "setpoint_weight"),
+}
+UNITS = {"zeta": "1", "omega_n_rad_s": "rad/s", "tau_motor_s": "s", "setpoint_weight": "1"}
+
+
+class DriveFileError(_Base):  # type: ignore[misc,valid-type]
+    """A drive.json is unreadable or invalid; the message names the file and the field."""
+
+    def __init__(self, source: str, message: str, field_name: str | None = None):
+        self.source, self.field = source, field_name
+        where = source + (f", field '{field_name}'" if field_name else "")
+        super().__init__(f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class Drive:
+    """An identified speed loop (SI).
+
+    Attributes:
+        model: one of :data:`MODELS`.
+        zeta: damping ratio of the PI loop [-] (> 0).
+        omega_n: natural frequency of the PI loop [rad/s] (> 0).
+        tau_motor: torque lag [s] (>= 0; 0 for ``second-order``).
+        setpoint_weight: b, weight of the setpoint in the proportional part [-] (> 0).
+        ci95: parameter name (file name, e.g. ``omega_n_rad_s``) -> (low, high) 95 % interval.
+        fit: informative fit data (residual check, sizes); not validated.
+        source: where the drive came from (a path or a description).
+    """
+
+    model: str = "second-order"
+    zeta: float = 0.5
+    omega_n: float = 2.2
+    tau_motor: float = 0.0
+    setpoint_weight: float = 1.0
+    ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
+    fit: dict[str, Any] = field(default_factory=dict)
+    source: str = "default"
+
+    def __post_init__(self) -> None:
+        src = self.source
+        if self.model not in MODELS:
+            raise DriveFileError(src, f"expected one of {', '.join(MODELS)}, got {self.model!r}",
+                                 "model")
+        for name, value, low in (("zeta", self.zeta, 0.0), ("omega_n_rad_s", self.omega_n, 0.0),
+                                 ("setpoint_weight", self.setpoint_weight, 0.0)):
+            _check_number(src, name, value, low, strict=True)
+        _check_number(src, "tau_motor_s", self.tau_motor, 0.0, strict=False)
+        if self.model == "second-order" and self.tau_motor != 0.0:
+            raise DriveFileError(src, "must be 0 for the second-order model", "tau_motor_s")
+        if self.model != "pi-lag-weighted" and self.setpoint_weight != 1.0:
+            raise DriveFileError(src, f"must be 1 for the {self.model} model", "setpoint_weight")
+
+    @property
+    def theta_ref_mode(self) -> str:
+        """The PI reading of the drive (always the physical ``integral`` one)."""
+        return "integral"
+
+    def value(self, name: str) -> float:
+        """Parameter by its file name (``zeta``, ``omega_n_rad_s``, ...)."""
+        return {"zeta": self.zeta, "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
+                "setpoint_weight": self.setpoint_weight}[name]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of the file (see the module docstring)."""
+        out: dict[str, Any] = {"kind": KIND, "version": VERSION, "model": self.model,
+                               "theta_ref_mode": self.theta_ref_mode, "zeta": self.zeta,
+                               "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
+                               "setpoint_weight": self.setpoint_weight}
+        for name, (lo, hi) in self.ci95.items():
+            out[f"{name}_ci95"] = [lo, hi]
+        out["units"] = dict(UNITS)
+        if self.fit:
+            out["fit"] = self.fit
+        out["source"] = self.source
+        return out
+
+
+def _check_number(source: str, name: str, value: Any, low: float, strict: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(float(value)) or (value <= low if strict else value < low):
+        raise DriveFileError(source, f"expected a finite number {'>' if strict else '>='} {low:g}, "
+                                     f"got {value!r}", name)
+    return float(value)
+
+
+def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
+    """Validate a parsed drive.json object; raises :class:`DriveFileError` naming the field."""
+    if not isinstance(obj, dict):
+        raise DriveFileError(source, "expected a JSON object")
+    if obj.get("kind") != KIND:
+        raise DriveFileError(source, f"expected {KIND!r} (a drive written by 'abu identify'), "
+                                     f"got {obj.get('kind')!r}", "kind")
+    if obj.get("version") != VERSION:
+        raise DriveFileError(source, f"expected version {VERSION}, got {obj.get('version')!r}",
+                             "version")
+    model = obj.get("model")
+    if model not in MODELS:
+        raise DriveFileError(source, f"expected one of {', '.join(MODELS)}, got {model!r}",
+                             "model")
+    mode = obj.get("theta_ref_mode", "integral")
+    if mode != "integral":
+        raise DriveFileError(source, f"expected 'integral', got {mode!r}", "theta_ref_mode")
+    for name in ("zeta", "omega_n_rad_s"):
+        if name not in obj:
+            raise DriveFileError(source, "missing", name)
+    values = {name: obj.get(name, default) for name, default in
+              (("zeta", None), ("omega_n_rad_s", None), ("tau_motor_s", 0.0),
+               ("setpoint_weight", 1.0))}
+    for name, value in values.items():
+        _check_number(source, name, value, 0.0, strict=name != "tau_motor_s")
+    ci95: dict[str, tuple[float, float]] = {}
+    for name in MODEL_PARAMETERS[model]:
+        key = f"{name}_ci95"
+        if key in obj and obj[key] is not None:
+            pair = obj[key]
+            if (not isinstance(pair, list) or len(pair) != 2
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                               and math.isfinite(v) for v in pair) or pair[0] > pair[1]):
+                raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
+                                     key)
+            ci95[name] = (float(pair[0]), float(pair[1]))
+    fit = obj.get("fit") or {}
+    return Drive(model=model, zeta=float(values["zeta"]),
+                 omega_n=float(values["omega_n_rad_s"]), tau_motor=float(values["tau_motor_s"]),
+                 setpoint_weight=float(values["setpoint_weight"]), ci95=ci95,
+                 fit=fit if isinstance(fit, dict) else {}, source=source)
+
+
+def load_drive(path: str | Path) -> Drive:
+    """Read and validate a drive.json; :class:`DriveFileError` names the file and the field."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise DriveFileError(str(p), f"cannot be read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise DriveFileError(str(p), "is not UTF-8 text (expected a JSON drive file)") from None
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DriveFileError(str(p), f"is not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    return drive_from_dict(obj, str(p))
+
+
+def dumps_drive(drive: Drive) -> str:
+    """Strict JSON text of a drive (what ``abu identify`` writes)."""
+    return json.dumps(drive.to_dict(), indent=2, allow_nan=False) + "\n"
