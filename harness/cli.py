@@ -122,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_overwrite(g)
     g.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     g.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
+    p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, "
+                   "omega_n and tau_motor replace --zeta, --omega-n, --tau-motor")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("table41", help="smallest |omega0| at which one step keeps the ball stuck",
@@ -177,6 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
     register(sub)
     from .cli_export import register as register_export
     register_export(sub)
+    from .cli_plan import register as register_plan
+    register_plan(sub)
     return parser
 
 
@@ -279,6 +283,8 @@ def describe(summary: dict[str, Any]) -> list[str]:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .experiments import run_ramp, run_staircase
 
+    from .cli_plan import apply_drive_to_args
+    apply_drive_to_args(args)
     exp = staircase_from_args(args) if args.motion == "staircase" else ramp_from_args(args)
     run = run_staircase if args.motion == "staircase" else run_ramp
     written = []

@@ -181,6 +181,9 @@ def _analysis_options(args: argparse.Namespace):
 
 def cmd_measure(args: argparse.Namespace) -> int:
     """``abu measure INPUT --out DIR``: track (or read tracks) and analyse."""
+    if getattr(args, "drive", None):  # a bad drive.json fails before the tracking
+        from controller.drive import load_drive
+        load_drive(args.drive)
     l = _positive("--l", args.l, "m")
     d = _positive("--d", args.d, "m")
     fps_opt = _positive("--fps", args.fps, "frames/s")
@@ -223,6 +226,9 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
     table, summary = analyse_tracks(time, x_f, y_f, l=l, d=d, lost=lost, options=options)
     summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracking,
                **summary}
+    if getattr(args, "drive", None):
+        from controller.drive import load_drive
+        summary["drive"] = load_drive(args.drive).to_dict()
     theta = table["theta_rad"]
     beta = table["beta_rad"]
     tracks_text = tracks_io.format_tracks_csv(time, theta, beta, x_f, y_f, lost)
@@ -307,6 +313,8 @@ def _describe_multi(r: dict) -> str:
 def cmd_render(args: argparse.Namespace) -> int:
     """``abu render --out DIR``: render the digital twin of the report's experiment."""
     from .twin import render_twin, twin_settings_from_args
+    from harness.cli_plan import apply_drive_to_args
+    apply_drive_to_args(args)
     settings = twin_settings_from_args(args)
     out = Path(args.out)
     with output_folder(out, overwrite=args.overwrite) as tmp:
@@ -379,6 +387,8 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
+    p.add_argument("--drive", default=None, help="drive.json of 'abu identify' of the setup that "
+                   "made the recording (recorded in summary.json for 'abu next')")
     p.set_defaults(func=cmd_measure)
 
     p = subparsers.add_parser("measure-summary", help="combine the intervals of several records",
@@ -401,6 +411,8 @@ def register(subparsers) -> None:
     add_overwrite(p)
     from .twin import add_render_arguments
     add_render_arguments(p)
+    p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, omega_n "
+                   "and tau_motor replace --zeta, --omega-n, --tau-motor")
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
     p.set_defaults(func=cmd_render)
 
