@@ -12,13 +12,16 @@ Python hosts, which differ in what they implement (checked in ``tests/test_ssp.p
 * **fmpy.ssp** (``simulate_ssp``) validates the SSD against the SSP 1.0 schema, applies no
   binding itself but a ``parameter_set`` argument with hierarchical names
   (``plant.mu``), ignores ``DefaultExperiment``, drives every declared input connector (0.0
-  until connected outputs arrive) and records every declared connector.
+  until connected outputs arrive) and records every declared connector;
+* **ecos** (ecospy, the ``ecos`` CLI) applies the component parameter sets of one *name*
+  (``init(parameter_set=...)``, ``--parameterSet``) and refuses a negative start time.
 
-So each component gets an inline binding with bare names (libcosim) and the system a binding
-to the SSV file with hierarchical names (fmpy: ``read_ssd(p).system.parameterBindings[0]
+So each component gets an inline binding with bare names (libcosim, ecos) and the system a
+binding to the SSV file with hierarchical names (fmpy: ``read_ssd(p).system.parameterBindings[0]
 .parameterValues[0]``); the SSP standard gives the system level precedence, and both hold the
-same values. Every output and every connected input of every FMU is a connector, so every
-output is recorded and no unconnected input is overwritten. Pure standard library (xml, zipfile): no numpy/lxml needed to write.
+same values; every parameter set is called ``name`` (``abu``). Every output and every connected
+input of every FMU is a connector, so every output is recorded and no unconnected input is
+overwritten. Pure standard library (xml, zipfile): writing needs neither numpy nor lxml.
 """
 from __future__ import annotations
 
@@ -269,7 +272,7 @@ def build_ssp_documents(name: str, components: Sequence[ComponentLike],
         params = _bound_parameters(comp, iface)
         if params:
             binding = _sub(_sub(element, "ssd", "ParameterBindings"), "ssd", "ParameterBinding")
-            _parameter_set(_sub(binding, "ssd", "ParameterValues"), comp.name, params)
+            _parameter_set(_sub(binding, "ssd", "ParameterValues"), name, params)
         system_params += [(f"{comp.name}.{p}", t, v) for p, t, v in params]
     if system_params:
         _sub(system_bindings, "ssd", "ParameterBinding", source=f"resources/{ssv_name}")

@@ -57,10 +57,11 @@ def cmd_export_ssp(args: argparse.Namespace) -> int:
         raise ParameterError("--out", args.out, "a file name ending in .ssp")
     exp = staircase_from_args(args)  # every option checked, errors name the option
     experiment = Experiment(exp.t_start, exp.t_end, exp.comm_step)
-    with tempfile.TemporaryDirectory(prefix="abu_ssp_fmus_") as tmp:
+    # the target is checked (and locked) first: a refused --out costs no FMU build
+    with output_file(out, overwrite=args.overwrite) as target, \
+            tempfile.TemporaryDirectory(prefix="abu_ssp_fmus_") as tmp:
         system = exp.system(build_fmus(tmp))
-        with output_file(out, overwrite=args.overwrite) as target:
-            write_ssp(target, system.components, system.connections, experiment)
+        write_ssp(target, system.components, system.connections, experiment)
     print(f"wrote {out} (start {exp.t_start:g} s, stop {exp.t_end:g} s, "
           f"step {exp.comm_step:g} s; components ref, ctrl, plant)")
     return 0

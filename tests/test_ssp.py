@@ -190,6 +190,7 @@ def test_archive_holds_ssd_fmus_and_parameter_set_matching_the_experiment(export
     for element in root.iterfind("ssd:System/ssd:Elements/ssd:Component", NS):
         pset = element.find("ssd:ParameterBindings/ssd:ParameterBinding/ssd:ParameterValues/"
                             "ssv:ParameterSet", NS)
+        assert pset.get("name") == ssv.get("name") == "abu"  # one name: ecos applies it by name
         assert {f"{element.get('name')}.{k}": v for k, v in values(pset).items()} == {
             k: v for k, v in expected.items() if k.startswith(element.get("name") + ".")}
     assert expected["plant.mu"] == 2.75e-3 and expected["ref.omega0"] == -17 * 2 * math.pi
