@@ -19,6 +19,8 @@ from typing import Any, Sequence
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams, DEFAULT_J_ABU, PlantParams
 
+from .cli_checks import (check_fmu_dir, check_ramp, check_staircase, check_sweep,
+                         check_table41, check_table41_speeds)
 from .cli_common import AbuArgumentParser, add_overwrite, option_error, run_command
 from .output_tx import output_file, output_folder
 
@@ -31,6 +33,7 @@ OPTION_OF = {"te": "--te", "t0": "--t0", "t_end": "--t-end", "comm_step": "--com
              "beta0": "--beta0", "jerk": "--jerk", "rounding": "--rounding",
              "theta_ref_mode": "--theta-ref", "t_step": "--t-step", "step_hz": "--step-hz"}
 
+FMU_NAMES = ("AbuBall", "SpeedController", "Staircase")
 REPORT_BOUNDS = {"mu_low": 2.63e-3, "mu_high": 4.14e-3}  # report eq. 4.9 (thesis reading)
 
 
@@ -285,6 +288,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     from .cli_plan import apply_drive_to_args
     apply_drive_to_args(args)
+    (check_staircase if args.motion == "staircase" else check_ramp)(args)
+    check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
     exp = staircase_from_args(args) if args.motion == "staircase" else ramp_from_args(args)
     run = run_staircase if args.motion == "staircase" else run_ramp
     written = []
@@ -309,7 +314,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_table41(args: argparse.Namespace) -> int:
     from .table41 import REPORT_TABLE, table41
 
+    check_table41(args)
+    check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
     try:
+        # closed form first (cheap): its speeds must be ones an ABU reaches before co-simulating
+        check_table41_speeds(table41(args.mu, theta_ref_mode=args.theta_ref, t_step=args.t_step,
+                                     step_hz=args.step_hz, check=False))
         rows = table41(args.mu, theta_ref_mode=args.theta_ref, t_step=args.t_step,
                        step_hz=args.step_hz, check=not args.no_check, fmu_dir=args.fmu_dir)
     except ParameterError as exc:
@@ -379,6 +389,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise ParameterError("--workers", args.workers, "at least 1 worker process")
+    check_sweep(args)
+    check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
     span = _finite("--span-hz", args.span_hz)
     if abs(span) < 1.0:
         raise ParameterError("--span-hz", span, "a span of at least one 1 Hz step")

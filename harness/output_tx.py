@@ -38,6 +38,8 @@ from typing import Iterator
 from abu_model.errors import AbuError
 
 RUN_PREFIX = "abu-run-"
+#: Temporary outputs this process is writing (removed on SIGTERM).
+_ACTIVE: set[Path] = set()
 
 
 class OutputError(AbuError):
@@ -72,6 +74,7 @@ class _Lock:
                 os.ftruncate(fd, 0)
                 os.write(fd, f"{os.getpid()}\n".encode())
                 self.fd = fd
+                _ACTIVE.add(self.path)
                 return True
             os.close(fd)
 
@@ -85,6 +88,7 @@ class _Lock:
     def release(self) -> None:
         if self.fd is None:
             return
+        _ACTIVE.discard(self.path)
         try:
             os.unlink(self.path)  # while still holding it: nobody else can be using it
         except FileNotFoundError:
@@ -197,6 +201,7 @@ def output_folder(out: str | os.PathLike, *, overwrite: bool = False,
     target = Path(out).absolute()
     with _locked_target(target, option, overwrite, want_dir=True):
         tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+        _ACTIVE.add(tmp)
         try:
             os.chmod(tmp, 0o777 & ~_umask())
             yield tmp
@@ -204,6 +209,8 @@ def output_folder(out: str | os.PathLike, *, overwrite: bool = False,
         except BaseException:
             _remove(tmp)
             raise
+        finally:
+            _ACTIVE.discard(tmp)
 
 
 def _swap_in(tmp: Path, target: Path) -> None:
@@ -226,6 +233,7 @@ def output_file(path: str | os.PathLike, *, overwrite: bool = False,
         fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
         os.close(fd)
         tmp = Path(name)
+        _ACTIVE.add(tmp)
         try:
             os.chmod(tmp, 0o666 & ~_umask())
             yield tmp
@@ -233,6 +241,8 @@ def output_file(path: str | os.PathLike, *, overwrite: bool = False,
         except BaseException:
             _remove(tmp)
             raise
+        finally:
+            _ACTIVE.discard(tmp)
 
 
 def _umask() -> int:
@@ -268,8 +278,7 @@ def _clean_stale_run_dirs(base: Path) -> None:
                 continue
             if lock.try_acquire(create=False):
                 shutil.rmtree(entry, ignore_errors=True)
-                lock.fd and os.close(lock.fd)
-                lock.fd = None
+                lock.release()
         except OSError:
             continue
 
@@ -302,7 +311,15 @@ def use_run_tempdir() -> Path:
 
 
 def _terminate(signum, frame) -> None:  # pragma: no cover - exercised by a subprocess test
-    raise SystemExit(128 + signum)
+    # Not an exception: raised inside a Python FMU it would become an FMU error message. Remove
+    # what this process was writing, then exit at once.
+    for path in list(_ACTIVE):
+        _remove(path)
+    _remove_run_dir(os.getpid())
+    try:
+        os.write(2, b"abu: terminated\n")
+    finally:
+        os._exit(128 + signum)
 
 
 def _remove_run_dir(pid: int) -> None:

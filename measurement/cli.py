@@ -22,14 +22,21 @@ import numpy as np
 
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import ParameterError
-from harness.cli_common import AbuArgumentParser, add_overwrite, option_error, run_command
+from harness.cli_common import (MAX_BINS, AbuArgumentParser, add_overwrite, in_range,
+                                integer_range, option_error, positive, run_command)
 from harness.output_tx import check_not_inside, output_folder
+
+from .input_checks import check_motion_and_roles, check_sampling
 
 DEFAULT_FPS = 4500.0
 #: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
 SUMMARY_KIND = "abu-measure-summary"
 SUMMARY_VERSION = 1
 COMBINED_KIND = "abu-measure-summary-combined"
+#: Option limits (why: in the messages).
+MAX_MC_DRAWS = 100_000
+MAX_POLY_DEGREE = 30
+MAX_FPS = 1.0e7
 DEFAULT_L = 1.15e-2
 DEFAULT_D = 3.0e-3
 
@@ -93,8 +100,11 @@ def _log(args: argparse.Namespace, message: str) -> None:
 
 # ------------------------------------------------------------------------------ tracking
 
-def _track_frames(args: argparse.Namespace, fps: float) -> dict:
-    """Read the recording, find or parse the seeds, track; returns the pieces for writing."""
+def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
+    """Read the recording, find or parse the seeds, track; returns the pieces for writing.
+
+    ``check(n_frames)`` is called after reading, before tracking (input checks).
+    """
     from .frames_io import read_recording
     from .markers import find_markers, format_seeds, parse_seeds
     from .tracking import track_recording
@@ -102,6 +112,8 @@ def _track_frames(args: argparse.Namespace, fps: float) -> dict:
 
     rec = read_recording(args.input)
     frames = rec.frames
+    if check is not None:
+        check(len(rec))
     if args.seeds is not None:
         seeds = parse_seeds(args.seeds)
         roles_note = "given by --seeds"
@@ -146,6 +158,7 @@ def _tracking_info(tr: dict, fps: float) -> dict:
 
 def cmd_track(args: argparse.Namespace) -> int:
     """``abu track INPUT --out DIR``: marker tracks only (tracks.csv, tracking.json)."""
+    _check_tracking_options(args)
     from . import tracks_io
     fps = _positive("--fps", args.fps, "frames/s") or DEFAULT_FPS
     out = Path(args.out)
@@ -168,8 +181,17 @@ def cmd_track(args: argparse.Namespace) -> int:
 def _analysis_options(args: argparse.Namespace):
     from .analysis import AnalysisOptions
     from .interval import IntervalOptions
-    if args.mc_draws < 0:
-        raise ParameterError("--mc-draws", args.mc_draws, "an integer >= 0")
+    integer_range("--mc-draws", args.mc_draws, 0, MAX_MC_DRAWS,
+                  "each draw reruns the analysis, about 50 ms")
+    integer_range("--poly-degree", args.poly_degree, 1, MAX_POLY_DEGREE,
+                  "the report estimator's global polynomial; higher degrees are ill-conditioned")
+    if args.trim_s is not None:
+        positive("--trim-s", args.trim_s, "s", allow_zero=True)
+    if args.sg_window_s is not None:
+        in_range("--sg-window-s", args.sg_window_s, 1e-6, 1.0, "s",
+                 "the record lasts well under a second; the default is 0.02 s")
+    if args.k_sigma is not None:
+        in_range("--k-sigma", args.k_sigma, 0.1, 100.0, "", "a multiple of the error bar")
     return AnalysisOptions(
         estimator=args.estimator, sg_window_s=_positive("--sg-window-s", args.sg_window_s, "s"),
         poly_degree=args.poly_degree, trim_s=args.trim_s, harmonic=not args.no_harmonic,
@@ -179,8 +201,18 @@ def _analysis_options(args: argparse.Namespace):
         mc_draws=args.mc_draws, seed=args.seed)
 
 
+def _check_tracking_options(args: argparse.Namespace) -> None:
+    positive("--fps", args.fps, "frames/s", allow_none=True)
+    if args.fps is not None:
+        in_range("--fps", args.fps, 1.0, MAX_FPS, "frames/s",
+                 "high-speed cameras record up to about 1e6 frames/s")
+    integer_range("--window", args.window, 8, 4096, "the square tracking window around a marker "
+                  "[px]")
+
+
 def cmd_measure(args: argparse.Namespace) -> int:
     """``abu measure INPUT --out DIR``: track (or read tracks) and analyse."""
+    _check_tracking_options(args)
     if getattr(args, "drive", None):  # a bad drive.json fails before the tracking
         from controller.drive import load_drive
         load_drive(args.drive)
@@ -197,6 +229,12 @@ def cmd_measure(args: argparse.Namespace) -> int:
     else:
         print(_describe(summary))
     return 0
+
+
+def _check_sampling(args: argparse.Namespace, time: np.ndarray, source: str, options) -> None:
+    check_sampling(time, source, fps_option="--fps", sg_window_s=options.sg_window_s,
+                   polyorder=options.sg_polyorder, estimator=options.estimator,
+                   trim_s=options.trim_s)
 
 
 def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None, options,
@@ -216,13 +254,16 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
                                      f"{args.input} ({1.0 / dt:.6g} frames/s from its time "
                                      "column), or leave --fps out")
         tracking = {"source": str(args.input), "tracks_csv": True}
+        _check_sampling(args, time, str(args.input), options)
         x_f = tracks_io.fill_lost(time, x, lost)
         y_f = tracks_io.fill_lost(time, y, lost)
     else:
         fps = fps_opt or DEFAULT_FPS
-        tr = _track_frames(args, fps)
+        tr = _track_frames(args, fps, check=lambda n: _check_sampling(
+            args, np.arange(n) / fps, "--fps", options))
         time, x_f, y_f, lost = tr["time"], tr["x"], tr["y"], tr["lost"]
         tracking = _tracking_info(tr, fps)
+    check_motion_and_roles(time, x_f, y_f, str(args.input))
     table, summary = analyse_tracks(time, x_f, y_f, l=l, d=d, lost=lost, options=options)
     summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracking,
                **summary}
@@ -278,6 +319,8 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
     from .multi import combine_summaries, plot_histogram, read_intervals
 
     out = Path(args.out)
+    integer_range("--bins", args.bins, 2, MAX_BINS, "grid points of the drawn histogram; the "
+                  "counts are exact at any grid")
     check_not_inside(out, args.summaries)
     intervals = read_intervals(args.summaries)
     with output_folder(out, overwrite=args.overwrite) as tmp:
