@@ -355,11 +355,23 @@ def _describe_multi(r: dict) -> str:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``abu render --out DIR``: render the digital twin of the report's experiment."""
+    out = Path(args.out)
+    if getattr(args, "scenario", "report") == "random":
+        if getattr(args, "drive", None):
+            raise ParameterError("--drive", args.drive, "no --drive with --scenario random "
+                                 "(its drive is drawn at random)")
+        from .scenario import random_scenario, render_scenario
+        scn = random_scenario(args.seed, size=args.size, lighting=args.lighting,
+                              n_frames=args.frames)
+        with output_folder(out, overwrite=args.overwrite) as tmp:
+            render_scenario(tmp, scn)
+        _log(args, f"wrote the random twin recording (seed {args.seed}, mu = {scn.ball.mu:.5g}, "
+                   f"{scn.drive.kind} drive, {scn.lighting.kind} lighting) to {out}")
+        return 0
     from .twin import render_twin, twin_settings_from_args
     from harness.cli_plan import apply_drive_to_args
     apply_drive_to_args(args)
     settings = twin_settings_from_args(args)
-    out = Path(args.out)
     with output_folder(out, overwrite=args.overwrite) as tmp:
         render_twin(tmp, settings)
     _log(args, f"wrote the twin recording to {out}")

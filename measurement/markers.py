@@ -101,7 +101,8 @@ def detect_blobs(frame: np.ndarray, *, dark: bool = False, r_min: float = 2.0,
     strongest = float(top.max())
     if strongest < min_contrast:
         return []
-    mask = (top > max(0.5 * strongest, min_contrast * 0.5)).astype(np.uint8)
+    # a quarter of the strongest: a saturated brass ball must not hide a dim paper marker
+    mask = (top > max(0.25 * strongest, min_contrast * 0.5)).astype(np.uint8)
     n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     out = []
     a_min, a_max = math.pi * r_min ** 2 * 0.5, math.pi * r_max ** 2 * 1.5

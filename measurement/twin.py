@@ -359,7 +359,18 @@ def add_render_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exposure-fraction", type=float, default=r.exposure_fraction,
                    help="exposure / frame interval for motion blur (0 = none)")
     p.add_argument("--pixel-size", type=float, default=g.pixel_size, help="pixel size [m/px]")
-    p.add_argument("--seed", type=int, default=d.seed, help="noise seed")
+    p.add_argument("--seed", type=int, default=d.seed,
+                   help="noise seed; with --scenario random the seed of every drawn setting")
+    p.add_argument("--scenario", choices=["report", "random"], default="report",
+                   help="report (default): the report's experiment with the options above; "
+                        "random: draw mu, drive, lighting, optics and sensor from --seed (the "
+                        "harsh family of measurement.scenario; only --seed, --size, --lighting "
+                        "and --frames apply)")
+    p.add_argument("--size", type=int, default=256,
+                   help="--scenario random: frame width = height [px] (>= 200, default 256)")
+    p.add_argument("--lighting", choices=["ring", "two_spot"], default=None,
+                   help="--scenario random: force the TL ring or the two-spot lighting (two "
+                        "reflections on the ball; default: drawn, 25 %% two_spot)")
 
 
 def twin_settings_from_args(args: argparse.Namespace) -> TwinSettings:
@@ -373,3 +384,11 @@ def twin_settings_from_args(args: argparse.Namespace) -> TwinSettings:
                    omega_end=args.omega_end_hz * TWO_PI, t0=args.t0, te=args.te, fps=args.fps,
                    n_frames=args.frames, beta0=args.beta0, drive=drive, render=render,
                    geometry=replace(d.geometry, pixel_size=args.pixel_size), seed=args.seed)
+
+
+def random_scenario(seed: int, **options: Any):
+    """One scenario of the harsh twin family (see :func:`measurement.scenario.random_scenario`);
+    render it with :func:`measurement.scenario.render_scenario`."""
+    from .scenario import random_scenario as draw
+
+    return draw(seed, **options)
