@@ -149,13 +149,19 @@ class Design:
     def relative_width(self) -> np.ndarray:
         return (self.mu_high - self.mu_low) / self.mu
 
+    @property
+    def t_end_s(self) -> float:
+        """End of the simulation [s]: the record's end, or the staircase's if later (rounded
+        up to 1 us so that the printed value is not below it)."""
+        return math.ceil(max(self.spec.record_s, self.t0_s + self.te_s) * 1e6) / 1e6
+
     def simulate_args(self) -> list[str]:
         """Arguments that make ``abu simulate`` run this experiment (add ``--mu``)."""
         d = self.spec.drive
         return ["--motion", "staircase", "--omega0-hz", f"{self.omega0_hz:d}",
                 "--omega-end-hz", f"{self.omega_end_hz:g}", "--t0", f"{self.t0_s:.6g}",
                 "--te", f"{self.te_s:.6g}", "--rounding", self.rounding,
-                "--step-hz", f"{self.spec.step_hz:g}", "--t-end", f"{self.spec.record_s:.6g}",
+                "--step-hz", f"{self.spec.step_hz:g}", "--t-end", f"{self.t_end_s:.6g}",
                 "--zeta", f"{d.zeta:.9g}", "--omega-n", f"{d.omega_n:.9g}",
                 "--tau-motor", f"{d.tau_motor:.9g}"]
 
