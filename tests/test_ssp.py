@@ -24,6 +24,7 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
+from abu_model.errors import ParameterError
 from fmus.ssp import NS, SSD_NAME, Experiment, read_default_experiment, read_fmu_interface, \
     write_ssp
 from harness.cli import build_parser, main, staircase_from_args
@@ -223,6 +224,29 @@ def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys):
     out.write_bytes(b"earlier")
     assert main(["export-ssp", "--out", str(out)]) == 2  # no --overwrite
     assert "--overwrite" in capsys.readouterr().err and out.read_bytes() == b"earlier"
+
+
+def test_write_ssp_refuses_what_no_host_could_run(tmp_path, reference):
+    from fmus.ssp import SspError
+    from harness.system import Connection
+
+    exp, _ = reference
+    system = exp.system(ensure_fmus())
+    good = Experiment(exp.t_start, exp.t_end, exp.comm_step)
+    out = tmp_path / "x.ssp"
+    unknown = [dataclasses.replace(c, parameters={**c.parameters, "muu": 1.0})
+               if c.name == "plant" else c for c in system.components]
+    with pytest.raises(SspError, match="no variable 'muu'"):
+        write_ssp(out, unknown, system.connections, good)
+    with pytest.raises(SspError, match="expected an input"):
+        write_ssp(out, system.components, [Connection("ctrl.torque", "plant.omega")], good)
+    with pytest.raises(ParameterError, match="plant.mu"):
+        write_ssp(out, [dataclasses.replace(c, parameters={**c.parameters, "mu": math.nan})
+                        if c.name == "plant" else c for c in system.components],
+                  system.connections, good)
+    with pytest.raises(ParameterError, match="stop_time"):
+        Experiment(1.0, 1.0, 1e-3)
+    assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
 # ---------------------------------------------------------------------------- other tools
