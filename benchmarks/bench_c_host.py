@@ -129,7 +129,8 @@ def main() -> int:
         assert abu(["export-ssp", "--out", str(ssp)]) == 0
         exp = read_default_experiment(ssp)
         steps = round((exp.stop_time - exp.start_time) / exp.step_size)
-        ref = run_staircase(staircase_from_args(build_parser().parse_args(["simulate", "--comm-step", repr(exp.step_size)]))).summary
+        simulate = build_parser().parse_args(["simulate", "--comm-step", repr(exp.step_size)])
+        ref = run_staircase(staircase_from_args(simulate)).summary
         cmd, env = [str(exe), str(ssp), str(steps)], plain_env()
 
         statuses: Counter[int] = Counter()

@@ -278,9 +278,10 @@ def test_a_python_with_only_libcosimpy_runs_the_export(tmp_path, exported, refer
                            "['purelib'])"], capture_output=True, text=True, check=True).stdout
     os.symlink(Path(libcosimpy.__file__).parent, Path(site.strip()) / "libcosimpy")
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
-    bare = subprocess.run([str(python), "-c", "import importlib.util as u; print([m for m in "
-                           "('numpy', 'scipy', 'fmpy', 'pythonfmu', 'abu_model') if u.find_spec(m)])"],
-                          capture_output=True, text=True, env=env, check=True, cwd=tmp_path)
+    probe = ("import importlib.util as u; print([m for m in "
+             "('numpy', 'scipy', 'fmpy', 'pythonfmu', 'abu_model') if u.find_spec(m)])")
+    bare = subprocess.run([str(python), "-c", probe], capture_output=True, text=True, env=env,
+                          check=True, cwd=tmp_path)
     assert bare.stdout.strip() == "[]"
     steps = _steps(read_default_experiment(exported))
     proc = subprocess.run([str(python), "-c", LIBCOSIM_CHILD, str(exported), str(steps)],
