@@ -107,7 +107,7 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
     """
     from .frames_io import read_recording
     from .markers import find_markers, format_seeds, parse_seeds
-    from .tracking import track_recording
+    from .reflections import track_markers
     from . import tracks_io
 
     rec = read_recording(args.input)
@@ -118,7 +118,8 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
         seeds = parse_seeds(args.seeds)
         roles_note = "given by --seeds"
     else:
-        seeds, roles = find_markers(np.asarray(frames[0]), dark=args.dark_markers)
+        seeds, roles = find_markers(np.asarray(frames[0]), dark=args.dark_markers,
+                                    ball_reflections=args.ball_reflections)
         roles_note = "found in frame 0"
         _log(args, "markers found in frame 0 (x, y px): " + ", ".join(
             f"{role} ({sx:.2f}, {sy:.2f})" for role, (sx, sy) in zip(roles, seeds)))
@@ -129,8 +130,9 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
             raise ParameterError("--seeds", format_seeds(seeds),
                                  f"positions inside the {w}x{h} px frame (position {i + 1} "
                                  "is outside)")
-    tracks = track_recording(frames, seeds, method=args.method, window=args.window,
-                             dark=args.dark_markers, progress=args.progress)
+    tracks = track_markers(frames, seeds, method=args.method, window=args.window,
+                           dark=args.dark_markers, progress=args.progress,
+                           ball_reflections=args.ball_reflections, ball_method=args.ball_method)
     time = np.arange(tracks.n_frames) / fps
     lost = np.asarray(tracks.lost, dtype=bool)
     try:
@@ -139,7 +141,10 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
     except tracks_io.LostMarkerError as exc:
         # Name the frame as the recording knows it (file name for a folder of frames).
         reasons = tracks.lost_summary()
-        raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: {reasons}") from None
+        hint = ("; if the ball shows two reflections, use --ball-reflections 2"
+                if args.ball_reflections == 1 and tracks.lost[:, 2].any() else "")
+        raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: {reasons}"
+                                        f"{hint}") from None
     return {"time": time, "x": x, "y": y, "lost": lost, "seeds": seeds, "source": rec.source,
             "seeds_note": roles_note, "method": tracks.method, "window": tracks.window,
             "lost_reasons": tracks.lost_summary()}
@@ -392,6 +397,12 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="isocontour",
                    help="centre-finding method: isocontour (default), report, moments")
     p.add_argument("--window", type=int, default=30, help="tracking window [px] (default 30)")
+    p.add_argument("--ball-reflections", type=int, choices=[1, 2], default=1,
+                   help="bright reflections on the ball: 1 (default; one marker at the ball) "
+                        "or 2 (the report's two-spot lighting, sec. 5.2)")
+    p.add_argument("--ball-method", choices=["outline", "pair"], default="outline",
+                   help="with --ball-reflections 2: outline (default; circle fit to the ball's "
+                        "silhouette) or pair (the report's way: the mean of the reflections)")
     p.add_argument("--progress", action="store_true", help="progress bar while tracking")
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
 

@@ -115,8 +115,9 @@ def make_lamps(kind: str, rng: np.random.Generator, *, stray: bool) -> LightingS
             lamps.append(Lamp((dist * math.cos(a) * math.cos(elev),
                                dist * math.sin(a) * math.cos(elev), dist * math.sin(elev)),
                               u(0.8, 1.2) * 0.6 * dist ** 2))
-        # the 650 W lamp on the umbrella: strong indirect light from above
-        ambient, kd, ks, shin = u(0.8, 1.4), u(0.4, 0.7), u(5.0, 12.0), u(60.0, 160.0)
+        # the 650 W lamp on the umbrella: strong indirect light from above, which the brass
+        # mirrors (kd > albedo of the ABU: the body of the ball stands out, brightest on top)
+        ambient, kd, ks, shin = u(0.8, 1.4), u(0.9, 1.8), u(5.0, 12.0), u(60.0, 160.0)
         flicker = u(0.0, 0.03)   # incandescent: little 100 Hz ripple
     else:
         raise ParameterError("lighting", kind, f"one of {', '.join(LIGHTINGS)}")
@@ -130,7 +131,7 @@ def make_lamps(kind: str, rng: np.random.Generator, *, stray: bool) -> LightingS
             a, elev, dist = u(0, 2 * math.pi), u(math.radians(8), math.radians(25)), u(0.3, 0.6)
             lamps.append(Lamp((dist * math.cos(a) * math.cos(elev),
                                dist * math.sin(a) * math.cos(elev), dist * math.sin(elev)),
-                              u(0.05, 0.3) * e_main * dist ** 2 / math.sin(elev)))
+                              u(0.03, 0.15) * e_main * dist ** 2))
     return LightingSpec(kind, tuple(lamps), ambient, cam_h, kd, ks, shin, flicker,
                         u(0, 2 * math.pi), n_stray)
 

@@ -137,8 +137,30 @@ def _refine(frame: np.ndarray, blobs: list[dict], dark: bool, window: int) -> No
             b["x"], b["y"], b["radius"] = x0 + float(x[0]), y0 + float(y[0]), float(r[0])
 
 
+def _merge_reflections(blobs: list[dict], distance: float) -> list[dict]:
+    """Merge candidates closer than ``distance`` [px] (two reflections on one ball) into one."""
+    out = list(blobs)
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                a, b = out[i], out[j]
+                if math.hypot(a["x"] - b["x"], a["y"] - b["y"]) < distance:
+                    out[i] = {"x": 0.5 * (a["x"] + b["x"]), "y": 0.5 * (a["y"] + b["y"]),
+                              "area": a["area"] + b["area"],
+                              "contrast": max(a["contrast"], b["contrast"]), "merged": True}
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return out
+
+
 def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window: int = 30,
-                 r_min: float = 2.0, r_max: float = 12.0) -> tuple[np.ndarray, list[str]]:
+                 r_min: float = 2.0, r_max: float = 12.0, ball_reflections: int = 1
+                 ) -> tuple[np.ndarray, list[str]]:
     """Find the ABU centre, CD and ball markers in one frame (see the module doc for the rule).
 
     Args:
@@ -148,6 +170,8 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
             ``l_px`` and ``r_cd_px`` [px]) giving the expected marker radii.
         window: tracking window [px], used for the sub-pixel refinement.
         r_min, r_max: plausible marker radii [px].
+        ball_reflections: 2 when the ball shows two reflections (two-spot lighting): candidates
+            closer than 14 px are merged into one ball candidate at their mean.
 
     Returns:
         seeds (3, 2) [px] in the order centre, CD, ball, and the role names.
@@ -158,13 +182,15 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
     """
     img = np.asarray(frame)
     blobs = detect_blobs(img, dark=dark, r_min=r_min, r_max=r_max)
+    if ball_reflections == 2:
+        blobs = _merge_reflections(blobs, 14.0)
     hint = " Give the positions with --seeds 'x,y;x,y;x,y' (ABU centre; CD marker; ball) [px]."
     listing = "; ".join(f"({b['x']:.1f}, {b['y']:.1f}) contrast {b['contrast']:.0f}"
                         for b in blobs[:8])
     if len(blobs) != 3:
         raise MarkerError(f"found {len(blobs)} marker candidates, expected 3"
                           f"{': ' + listing if blobs else ''}.{hint}")
-    _refine(img, blobs, dark, window)
+    _refine(img, [b for b in blobs if not b.get("merged")], dark, window)
     p = np.array([[b["x"], b["y"]] for b in blobs])
     d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
     if geometry is not None:
