@@ -63,6 +63,9 @@ class LightingSpec:
         kd, ks, shininess: the brass ball's diffuse and glossy reflectance [-] and exponent.
         flicker: relative amplitude of the 100 Hz TL flicker [-]; flicker_phase [rad].
         n_stray: how many of the lamps are stray side lamps (last in ``lamps``).
+        wall_height: height of the ABU channel's outer wall above its floor [m] (0 = none);
+            it shades the ball from low lamps behind it over part of each revolution.
+        wall_soft: width of the wall's penumbra (lamp size, chamfer) [m].
     """
 
     kind: str
@@ -75,6 +78,8 @@ class LightingSpec:
     flicker: float
     flicker_phase: float
     n_stray: int = 0
+    wall_height: float = 0.0
+    wall_soft: float = 0.5e-3
 
     def __post_init__(self) -> None:
         if self.kind not in LIGHTINGS:
@@ -90,7 +95,8 @@ class LightingSpec:
                 "n_stray_lamps": self.n_stray, "ambient": self.ambient,
                 "camera_height_m": self.camera_height, "ball_kd": self.kd, "ball_ks": self.ks,
                 "ball_shininess": self.shininess, "flicker_100hz_relative": self.flicker,
-                "flicker_phase_rad": self.flicker_phase, "ball_reflections": self.reflections}
+                "flicker_phase_rad": self.flicker_phase, "ball_reflections": self.reflections,
+                "wall_height_m": self.wall_height, "wall_soft_m": self.wall_soft}
 
 
 def make_lamps(kind: str, rng: np.random.Generator, *, stray: bool) -> LightingSpec:
@@ -133,7 +139,8 @@ def make_lamps(kind: str, rng: np.random.Generator, *, stray: bool) -> LightingS
                                dist * math.sin(a) * math.cos(elev), dist * math.sin(elev)),
                               u(0.03, 0.15) * e_main * dist ** 2))
     return LightingSpec(kind, tuple(lamps), ambient, cam_h, kd, ks, shin, flicker,
-                        u(0, 2 * math.pi), n_stray)
+                        u(0, 2 * math.pi), n_stray, wall_height=u(1.1, 1.8) * 1.5e-3,
+                        wall_soft=u(0.3, 0.8) * 1.5e-3)
 
 
 def _irradiance_at_axis(lamps: list[Lamp], ambient: float) -> float:
@@ -169,15 +176,42 @@ def ball_radiance(spec: LightingSpec, centre: np.ndarray, nx: np.ndarray, ny: np
     for lp, p in zip(pos, power):
         d = lp - centre
         r2 = float(d @ d)
+        vis = wall_visibility(spec, centre, lp)
+        if vis <= 0.0:
+            continue
         L = d / math.sqrt(r2)
         H = L + v
         H /= np.linalg.norm(H)
-        e = p / r2
+        e = vis * p / r2
         ndl = nx * L[0] + ny * L[1] + nz * L[2]
         ndh = nx * H[0] + ny * H[1] + nz * H[2]
         out = out + e * (spec.kd * np.maximum(ndl, 0.0)
                          + spec.ks * np.maximum(ndh, 0.0) ** spec.shininess)
     return out
+
+
+def wall_visibility(spec: LightingSpec, centre: np.ndarray, lamp: np.ndarray) -> float:
+    """Visible fraction [0, 1] of a lamp from the ball centre over the channel's outer wall.
+
+    The ball (radius R = centre height) rests on the floor against the outer wall, a cylinder
+    of radius |centre_xy| + R and height ``wall_height``. The ray to the lamp leaves that
+    cylinder at height z; visibility ramps from 0 to 1 as z passes the wall's top (penumbra
+    ``wall_soft``). Lamps seen across the channel (outward and low) dim and vanish over part
+    of each revolution: a non-sinusoidal function of the ball's angle, rich in harmonics.
+    """
+    if spec.wall_height <= 0.0:
+        return 1.0
+    R = float(centre[2])
+    d = np.asarray(lamp, dtype=float) - centre
+    dh = math.hypot(d[0], d[1])
+    if dh == 0.0:
+        return 1.0
+    ux, uy = d[0] / dh, d[1] / dh
+    cu = centre[0] * ux + centre[1] * uy
+    rw = math.hypot(centre[0], centre[1]) + R
+    s = -cu + math.sqrt(max(cu * cu - (centre[0] ** 2 + centre[1] ** 2 - rw * rw), 0.0))
+    z = R + s * d[2] / dh
+    return float(np.clip((z - spec.wall_height) / spec.wall_soft + 0.5, 0.0, 1.0))
 
 
 def ball_sprites(spec: LightingSpec, l: float, radius_px: float, ball_z: float,

@@ -9,7 +9,7 @@ plant and filmed with physical nuisances (``abu render --scenario random --seed 
   the report's fig. 5.8, torque lag 0-30 ms; the drive is redrawn until the rotor alone predicts
   the first slip inside the recording (0.12-0.55 s), so every scenario has a slip to measure;
 * the light (:mod:`measurement.lighting`): the report's TL ring (75 %) or two-spot indirect
-  lighting with two reflections on the ball (25 %), stray side lamps (40 %), 100 Hz flicker;
+  lighting with two reflections on the ball (25 %), stray side lamps (60 %), 100 Hz flicker;
 * the lens and sensor (:mod:`measurement.optics`): radial distortion, PSF, vignetting,
   shot / read noise, column fixed-pattern noise, saturation, motion blur;
 * the set-up: pixel size 0.28-0.32 mm, the axis a few px off the frame centre, an eccentric
@@ -159,7 +159,7 @@ def random_scenario(seed: int, *, size: int = 256, lighting: str | None = None,
     times = np.arange(n_frames) / fps
     drive, t_pred = _draw_drive(rng, mu, times, ball)
     kind = lighting or ("two_spot" if rng.random() < 0.25 else "ring")
-    light = make_lamps(kind, rng, stray=rng.random() < 0.4)
+    light = make_lamps(kind, rng, stray=rng.random() < 0.6)
     c = (size - 1) / 2.0
     ps = u(0.28e-3, 0.32e-3)
     # the CD marker >= 30 px outside the ball's path, so their tracking windows never overlap
