@@ -24,6 +24,7 @@ from abu_model.errors import AbuError, ParameterError
 from abu_model.params import check_positive
 
 from . import harmonic as harmonic_mod
+from . import inference as inference_mod
 from . import interval as interval_mod
 from . import kinematics as kin_mod
 from . import tracks_io, uncertainty
@@ -51,7 +52,9 @@ class AnalysisOptions:
         harmonic_amp_degree: polynomial degree in time of the harmonic's amplitude.
         harmonic_phase: ``ball`` (ball angle in the image, theta + beta) or ``cd`` (theta).
         knot_spacing_s: knot spacing of the monotone beta basis [s].
-        interval: :class:`interval.IntervalOptions`.
+        interval: :class:`interval.IntervalOptions` (the report's running-max interval).
+        inference: :class:`inference.InferenceOptions` (the model-based confidence set, the
+            reported ``mu_low``, ``mu_high``); None: the running-max interval only.
         mc_draws: Monte Carlo draws (0: none).
         seed: Monte Carlo seed.
         e_omega, e_omega_dot: relative error bounds of the report's worst case (0.03, 0.05).
@@ -59,17 +62,19 @@ class AnalysisOptions:
     """
 
     estimator: str = "savgol"
-    sg_window_s: float = 0.02
-    sg_polyorder: int = 3
+    sg_window_s: float = 0.036
+    sg_polyorder: int = 7
     decimation: int = 10
     poly_degree: int = 10
     trim_s: float | None = None
     harmonic: bool = True
-    harmonic_orders: tuple[int, ...] = (1,)
+    harmonic_orders: tuple[int, ...] = (1, 2, 3, 4)
     harmonic_amp_degree: int = 0
     harmonic_phase: str = "ball"
     knot_spacing_s: float = 0.005
     interval: interval_mod.IntervalOptions = field(default_factory=interval_mod.IntervalOptions)
+    inference: inference_mod.InferenceOptions | None = field(
+        default_factory=inference_mod.InferenceOptions)
     mc_draws: int = 0
     seed: int = 0
     e_omega: float = uncertainty.REPORT_E_OMEGA
@@ -100,6 +105,11 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
     if opt.estimator == "savgol":
         return kin_mod.savgol_kinematics(time, theta, window_s=opt.sg_window_s,
                                          polyorder=opt.sg_polyorder,
+                                         # degree >= 5: the half-window comparison is too
+                                         # noisy to see a kink; 2/3 of the window and 2 sigma
+                                         bias_window_ratio=0.5 if opt.sg_polyorder <= 3
+                                         else 2.0 / 3.0,
+                                         bias_k=3.0 if opt.sg_polyorder <= 3 else 2.0,
                                          trim_s=0.0 if opt.trim_s is None else opt.trim_s)
     return kin_mod.report_kinematics(time, theta, decimation=opt.decimation,
                                      degree=opt.poly_degree,
@@ -107,7 +117,7 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
 
 
 def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
-          opt: AnalysisOptions) -> dict:
+          opt: AnalysisOptions, lost: np.ndarray | None = None, infer: bool = True) -> dict:
     """Angles, kinematics, harmonic removal and interval for filled coordinates."""
     theta, beta = tracks_io.angles_from_pixels(x, y)
     kin = _kinematics(time, theta, opt)
@@ -128,7 +138,17 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
                                     kin.sigma_omega_dot, trusted, harm.beta_clean, harm.residual,
                                     l=l, d=d, options=opt.interval, direction=direction,
                                     bias_omega_dot=kin.bias_omega_dot)
-    return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv}
+    inf = None
+    if infer and opt.inference is not None:
+        lost_any = None if lost is None else np.asarray(lost, bool)[:, 1:].any(axis=1)
+        # beta with the lighting harmonics removed by the whole-record fit (monotone b(t) +
+        # harmonics over all revolutions): over the short inference window a free harmonic
+        # would trade off against the slip curve.
+        inf = inference_mod.infer_mu(time, theta, harm.beta_clean, kin.omega, kin.omega_dot,
+                                     kin.sigma_omega, kin.sigma_omega_dot, kin.bias_omega_dot,
+                                     trusted, l=l, d=d, direction=direction, lost=lost_any,
+                                     deviation=iv.deviation, options=opt.inference)
+    return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}
 
 
 def _validate(time, x, y, lost, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -194,8 +214,8 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
                             max_fraction=opt.max_lost_fraction)
     y = tracks_io.fill_lost(time, y, lost, max_gap=opt.max_lost_gap,
                             max_fraction=opt.max_lost_fraction)
-    core = _core(time, x, y, l, d, opt)
-    kin, harm, iv = core["kin"], core["harm"], core["iv"]
+    core = _core(time, x, y, l, d, opt, lost=lost)
+    kin, harm, iv, inf = core["kin"], core["harm"], core["iv"], core["inf"]
     dt = kin_mod.sample_interval(time)
 
     table = {
@@ -209,6 +229,13 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
         "running_max_lo": iv.running_max_lo, "running_max_hi": iv.running_max_hi,
         "trusted": kin.trusted.astype(int), "lost": tracks_io.lost_bitmask(lost),
     }
+    if inf is not None:
+        nan = np.full(time.size, np.nan)
+        table["beta_model_rad"] = inf.beta_model
+        table["beta_model_low_rad"] = nan if inf.beta_model_low is None else inf.beta_model_low
+        table["beta_model_high_rad"] = nan if inf.beta_model_high is None else \
+            inf.beta_model_high
+        table["beta_model_residual_rad"] = inf.residual
 
     def at(arr: np.ndarray, t: float | None) -> float | None:
         if t is None:
@@ -233,16 +260,43 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
         measured[f"t_{tag}_attained"] = t_at
         measured[f"e_omega_{tag}"] = at(kin.sigma_omega, t_at) / w if w > 0 else None
         measured[f"e_omega_dot_{tag}"] = at(kin.sigma_omega_dot, t_at) / a if a > 0 else None
-    mu_low, mu_high = iv.mu_low, iv.mu_high
-    width = None
-    if mu_low is not None and mu_high is not None:
-        width = (mu_high - mu_low) / (0.5 * (mu_high + mu_low))
+    def rel_width(lo: float | None, hi: float | None) -> float | None:
+        return None if lo is None or hi is None else (hi - lo) / (0.5 * (hi + lo))
+
+    running = {
+        "mu_low": iv.mu_low, "mu_high": iv.mu_high, "status": iv.status,
+        "t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
+        "relative_width": rel_width(iv.mu_low, iv.mu_high),
+        "mu_low_creep_model": iv.mu_creep,
+        "mu_low_no_error_bars": at(iv.running_max, iv.t_a),
+        "mu_high_no_error_bars": at(iv.running_max, iv.t_b),
+        "k_sigma": opt.interval.k_sigma,
+        "method": "report's running maximum of mu_req (sec. 5.3) with k-sigma error bands",
+    }
+    if inf is not None:
+        mu_low, mu_high, status = inf.mu_low, inf.mu_high, inf.status
+        model = {"method": "profile likelihood of the ball model's beta(t) (measurement."
+                           "inference)",
+                 "confidence": inf.confidence, "mu_hat": inf.mu_hat, "mu_d": inf.mu_d,
+                 "mu_d_low": inf.mu_d_low, "mu_d_high": inf.mu_d_high,
+                 "t_slip": inf.t_slip, **inf.details}
+    else:
+        mu_low, mu_high, status = iv.mu_low, iv.mu_high, iv.status
+        model = None
 
     summary: dict[str, Any] = {
         "mu_low": mu_low, "mu_high": mu_high,
+        "status": status,
+        "confidence": None if inf is None else inf.confidence,
+        "mu_hat": None if inf is None else inf.mu_hat,
+        "mu_d": None if inf is None else inf.mu_d,
+        "mu_d_low": None if inf is None else inf.mu_d_low,
+        "mu_d_high": None if inf is None else inf.mu_d_high,
+        "t_slip": None if inf is None else inf.t_slip,
+        "relative_width": rel_width(mu_low, mu_high),
+        "running_max": running,
+        "model_fit": model,
         "t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
-        "relative_width": width,
-        "status": iv.status,
         "mu_low_creep_model": iv.mu_creep,
         "mu_low_no_error_bars": at(iv.running_max, iv.t_a),
         "mu_high_no_error_bars": at(iv.running_max, iv.t_b),
@@ -279,14 +333,18 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
     }
     if opt.mc_draws > 0:
         def run(xn: np.ndarray, yn: np.ndarray) -> tuple[float | None, float | None]:
-            out = _core(time, xn, yn, l, d, opt)["iv"]
+            # the running-max interval's noise spread; the model-based set carries its own
+            # (likelihood) uncertainty and is not rerun per draw
+            out = _core(time, xn, yn, l, d, opt, lost=lost, infer=False)["iv"]
             return out.mu_low, out.mu_high
 
         summary["monte_carlo"] = uncertainty.monte_carlo(
             run, x, y, np.asarray(summary["noise"]["sigma_px"]), draws=opt.mc_draws,
             seed=opt.seed)
     summary["units"] = {
-        "mu_low": "1", "mu_high": "1", "t_slip_low": "s", "t_slip_high": "s",
+        "mu_low": "1", "mu_high": "1", "mu_hat": "1", "mu_d": "1", "mu_d_low": "1",
+        "mu_d_high": "1", "confidence": "1 (probability)", "t_slip": "s",
+        "t_slip_low": "s", "t_slip_high": "s",
         "relative_width": "1 ((mu_high - mu_low) / mid-point)", "sigma_px": "px",
         "e_*": "1 (relative)", "t_*": "s", "*_rad": "rad", "*_rad_s": "rad/s",
         "*_rad_s2": "rad/s^2", "*_s": "s", "*_m": "m", "*_hz": "1/s",

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from scipy.stats import norm
+from scipy.special import ndtri
 
 from abu_model.errors import ParameterError
 
@@ -168,40 +168,27 @@ def predicted_creep(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
 
     The ball starts stuck at sample ``start``; omega, omega_dot are taken as the true motion of
     the ABU; dynamic friction equals mu. Stick while (l - d/5) a <= mu l omega^2 with
-    a = -direction * omega_dot the acceleration pushing the ball along ``direction``; in slip,
-    with u >= 0 the slip speed, 1.4 l u' = (l - d/5) a - mu F_N/m and
-    F_N/m = l (omega + s u)^2 + 0.4 l u^2 - 0.2 d omega s u (s = direction, DESIGN sec. 2);
-    re-stick when u returns to 0. Integrated sample by sample (the input held constant over a
-    sample interval, exact for constant u').
+    a = -direction * omega_dot the acceleration pushing the ball along ``direction``; in slip
+    the ball's equation (DESIGN sec. 2) linearised in the slip speed (u / omega is a few per
+    cent), re-stick when u returns to 0; see :func:`measurement.inference.slip_displacement`,
+    which integrates all candidates at once with cumulative sums (no per-sample loop).
 
     Returns:
         (len(mu), len(time)) array, zero before ``start`` and held after ``stop``.
     """
+    from .inference import signed_mu_req, slip_displacement
+
     t = np.asarray(time, dtype=float)
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
     out = np.zeros((mu.size, t.size))
-    u = np.zeros(mu.size)
-    disp = np.zeros(mu.size)
-    slipping = np.zeros(mu.size, dtype=bool)
-    lever = l - d / 5.0
-    s = float(direction)
-    for i in range(start, stop):
-        h = t[i + 1] - t[i]
-        w = float(omega[i])
-        push = lever * (-s * float(omega_dot[i]))
-        normal = l * (w + s * u) ** 2 + 0.4 * l * u ** 2 - 0.2 * d * w * s * u
-        slipping = slipping | (push > mu * l * w * w)
-        acc = np.where(slipping, (push - mu * normal) / (1.4 * l), 0.0)
-        u_new = u + acc * h
-        stop_now = slipping & (u_new <= 0.0)
-        # Exact for constant acceleration; where the ball re-sticks, integrate up to u = 0.
-        step = np.where(stop_now, np.where(acc < 0, -u * u / (2.0 * np.where(acc < 0, acc, -1.0)),
-                                           0.0), 0.5 * (u + u_new) * h)
-        disp = disp + np.where(slipping, step, 0.0)
-        u = np.where(stop_now, 0.0, np.where(slipping, u_new, 0.0))
-        slipping = slipping & ~stop_now
-        out[:, i + 1] = disp
-    out[:, stop + 1:] = disp[:, None]
+    if stop <= start:
+        return out
+    seg = slice(start, stop + 1)
+    q = signed_mu_req(np.asarray(omega)[seg], np.asarray(omega_dot)[seg], l, d, direction)
+    disp, _ = slip_displacement(t[seg], q, np.asarray(omega, dtype=float)[seg], mu, mu,
+                                direction, d / l)
+    out[:, seg] = disp
+    out[:, stop + 1:] = disp[:, -1:]
     return out
 
 
@@ -346,7 +333,7 @@ def _creep_lower_bound(t, omega, omega_dot, sigma_omega, band_omega_dot, mu_lo, 
     omega_c = np.sign(omega) * (np.abs(omega) + k * sigma_omega)
     omega_dot_c = np.sign(omega_dot) * a_mag
     n_blocks = max(1.0, (i1 - i0 + 1) / window)
-    k_c = max(k, float(norm.isf(options.false_alarm / n_blocks)))
+    k_c = max(k, float(-ndtri(options.false_alarm / n_blocks)))  # normal upper quantile
     limit = k_c * sigma_dev
 
     def rejected(candidates: np.ndarray) -> np.ndarray:

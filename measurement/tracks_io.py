@@ -2,16 +2,17 @@
 
 Input CSV (already-tracked coordinates, one row per frame)::
 
-    time,x_center,y_center,x_cd,y_cd,x_ball,y_ball
+    time_s,x_center_px,y_center_px,x_cd_px,y_cd_px,x_ball_px,y_ball_px
 
+or the older names without units (``time,x_center,y_center,x_cd,y_cd,x_ball,y_ball``);
 ``time`` in s (strictly increasing), coordinates in pixels. Pixel coordinates follow OpenCV: ``x``
 is the column, ``y`` the row, and ``y`` points *down* the image. Lines starting with ``#`` are
 comments; extra columns are ignored, except ``lost`` (see below) which is read when present.
 
-Output ``tracks.csv``::
+Output ``tracks.csv`` (plain CSV: no comment line, units in the column names, so
+``pandas.read_csv(path)`` and ``csv.DictReader`` read it with no options)::
 
-    # units: ...
-    time,theta,beta,x_center,y_center,x_cd,y_cd,x_ball,y_ball,lost
+    time_s,theta_rad,beta_rad,x_center_px,y_center_px,x_cd_px,y_cd_px,x_ball_px,y_ball_px,lost
 
 ``theta``, ``beta`` in rad, ``lost`` an integer bit mask of the markers the tracker lost in that
 frame (1 = centre, 2 = CD, 4 = ball; 0 = all found). Coordinates of a lost marker are interpolated
@@ -41,14 +42,13 @@ from abu_model.errors import AbuError
 #: Column names of an input tracks CSV, in the order centre, CD, ball.
 COORD_COLUMNS = ("x_center", "y_center", "x_cd", "y_cd", "x_ball", "y_ball")
 INPUT_COLUMNS = ("time",) + COORD_COLUMNS
-OUTPUT_COLUMNS = ("time", "theta", "beta") + COORD_COLUMNS + ("lost",)
+#: Column names written (units in the names); the reader accepts these and the old ones.
+UNIT_SUFFIX = {"time": "_s", "theta": "_rad", "beta": "_rad", **{c: "_px" for c in COORD_COLUMNS}}
+OUTPUT_COLUMNS = tuple(c + UNIT_SUFFIX[c]
+                       for c in ("time", "theta", "beta") + COORD_COLUMNS) + ("lost",)
 MARKERS = ("center", "cd", "ball")
 #: Minimum number of frames a tracks file must hold for the analysis (its smallest filters).
 MIN_ROWS = 20
-
-UNITS_LINE = ("# units: time [s]; theta, beta [rad]; x_*, y_* [px] (x = column, y = row, y points "
-              "down); lost: bit mask of markers lost by the tracker (1 = center, 2 = cd, "
-              "4 = ball), their coordinates interpolated in time")
 
 
 class TracksFileError(AbuError, ValueError):
@@ -127,11 +127,19 @@ def read_tracks_csv(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> Tra
         rows.append((line_no, record))
     if header is None:
         raise TracksFileError(p, f"no header line; expected the columns {','.join(INPUT_COLUMNS)}")
+    index = {}
+    # name a missing column in the style of the header (old names without units, or new)
+    old_style = any(c in header for c in INPUT_COLUMNS) and \
+        not any(c + UNIT_SUFFIX[c] in header for c in INPUT_COLUMNS)
     for name in INPUT_COLUMNS:
-        if name not in header:
+        # the unit-suffixed name (written since issue 7) or the old one
+        found = [c for c in (name + UNIT_SUFFIX[name], name) if c in header]
+        if not found:
             raise TracksFileError(p, f"missing column (header has {','.join(header)}; expected "
-                                     f"{','.join(INPUT_COLUMNS)})", line=header_line, column=name)
-    index = {name: header.index(name) for name in INPUT_COLUMNS}
+                                     f"{','.join(c + UNIT_SUFFIX[c] for c in INPUT_COLUMNS)} "
+                                     f"or {','.join(INPUT_COLUMNS)})", line=header_line,
+                                  column=name if old_style else name + UNIT_SUFFIX[name])
+        index[name] = header.index(found[0])
     lost_index = header.index("lost") if "lost" in header else None
     if len(rows) < min_rows:
         raise TracksFileError(p, f"{len(rows)} data rows; the analysis needs at least {min_rows}")
@@ -259,14 +267,13 @@ def angles_from_pixels(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.nda
 
 def format_tracks_csv(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, x: np.ndarray,
                       y: np.ndarray, lost: np.ndarray | None = None) -> str:
-    """The text of a ``tracks.csv`` (units line, header, one row per frame)."""
+    """The text of a ``tracks.csv`` (header with units in the names, one row per frame)."""
     n = len(time)
     mask = np.zeros(n, dtype=int) if lost is None else lost_bitmask(lost)
     cols = [np.asarray(time), np.asarray(theta), np.asarray(beta)]
     for j in range(3):
         cols += [np.asarray(x)[:, j], np.asarray(y)[:, j]]
     buf = io.StringIO()
-    buf.write(UNITS_LINE + "\n")
     buf.write(",".join(OUTPUT_COLUMNS) + "\n")
     for i in range(n):
         # repr-precision floats: the file round-trips exactly.

@@ -56,8 +56,9 @@ def test_tracks_csv_round_trip(tmp_path, record):
     np.testing.assert_array_equal(back.x, x)
     np.testing.assert_array_equal(back.lost, lost)
     text = (tmp_path / "tracks.csv").read_text().splitlines()
-    assert text[0].startswith("# units:")
-    assert text[1] == "time,theta,beta,x_center,y_center,x_cd,y_cd,x_ball,y_ball,lost"
+    # plain CSV (issue 7): no comment line, units in the column names
+    assert text[0] == ("time_s,theta_rad,beta_rad,x_center_px,y_center_px,x_cd_px,y_cd_px,"
+                       "x_ball_px,y_ball_px,lost")
 
 
 @pytest.mark.parametrize("mutate, match", [
@@ -133,7 +134,7 @@ def test_measure_tracks_csv_contains_the_true_mu(tracks_csv, record, tmp_path, c
     src = read_tracks_csv(tracks_csv)
     np.testing.assert_allclose(back.x, src.x)
     kin = (out / "kinematics.csv").read_text().splitlines()
-    assert kin[1].startswith("time_s,theta_rad,beta_rad")
+    assert kin[0].startswith("time_s,theta_rad,beta_rad")   # plain CSV: header first
 
 
 def test_measure_prints_a_readable_result(tracks_csv, tmp_path, capsys):

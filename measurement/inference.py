@@ -1,0 +1,477 @@
+"""Model-based inference of (mu, mu_d) from one record: a profile likelihood on beta(t).
+
+The ball's equations (DESIGN sec. 2, ``abu_model.dynamics``) driven by the measured ABU motion
+predict beta(t) for every candidate pair (mu, mu_d):
+
+* stick while the friction the ball needs stays within mu: q(t) <= mu, with
+  q(t) = (l - d/5) (-s omega_dot) / (l omega^2) the signed mu_req and s the slip direction;
+* from the first time q crosses mu (located between samples by linear interpolation), the slip
+  speed u = s beta' obeys 1.4 l u' = (l - d/5)(-s omega_dot) - mu_d F_N/m with
+  F_N/m = l (omega + s u)^2 + 0.4 l u^2 - 0.2 d omega s u, linearised in u/omega (u is a few
+  per cent of omega): u' = [omega^2 (q - mu_d) - mu_d s omega (2 - 0.2 d/l) u] / 1.4. That linear
+  ODE is solved for all candidates at once with an integrating factor and cumulative sums (no
+  per-sample Python loop); the ball re-sticks where u returns to 0 and may slip again when q
+  exceeds mu again (a few episodes, looped over episodes, not samples).
+
+Measured beta = b0 + s D(t; mu, mu_d) + sum_k [A_k sin k phi + B_k cos k phi
++ C_k sin k theta + E_k cos k theta] + noise, with phi = theta + beta the ball's angle in the
+image (lamps fixed in the world shade the ball, report sec. 5.2; several reflections give higher
+orders) and theta (the CD marker's apparent centre). b0 and the harmonic amplitudes enter
+linearly and are profiled out by least squares. The noise is coloured: an AR(1) process whose
+coefficient is estimated from the best fit's residuals; the fit is generalised least squares
+(pre-whitened). The profile likelihood ratio of mu (mu_d profiled out) against chi^2_1 at the
+stated confidence gives the set of mu the beta data allow *given* the measured kinematics.
+
+The kinematics themselves are uncertain: mu enters the model only through q, which scales with
+omega_dot / omega^2, so an error e on q at the slip is an error e on mu. The half-widths are
+combined with z times the relative 1-sigma error of q at the slip (noise of omega, omega_dot) in
+quadrature, and the estimator's truncation-error bound (Richardson, ``kinematics``) is added.
+
+Null bounds (``status`` says why): the data allow a ball that never slips within the trusted
+region (upper bound null); they allow a ball already slipping at its start (lower bound null);
+the ball or CD marker was lost (interpolated) across the slip (both null).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import chdtri, ndtri
+
+from abu_model.errors import ParameterError
+
+#: Ratio mu_d / mu explored by the profile (the issue's family is [0.6, 1]; wider is safer).
+MU_D_RATIO = (0.3, 1.0)
+
+
+@dataclass(frozen=True)
+class InferenceOptions:
+    """Settings of :func:`infer_mu`.
+
+    Attributes:
+        confidence: level of the confidence sets [-] (default 0.95).
+        harmonic_orders: orders of the lighting harmonics in phi = theta + beta and theta.
+        theta_harmonics: also fit harmonics of theta (apparent CD-marker shift).
+        n_mu, n_mu_d: grid sizes of the coarse search (refined around the bounds).
+        max_episodes: slip episodes followed per candidate (re-stick, re-slip).
+        ar_order_max: 1 = AR(1) residuals (0: white).
+        window_sigmas: the fit ends where the data have moved this many white-noise sigmas of
+            beta from the stick level (see :func:`infer_mu`).
+    """
+
+    confidence: float = 0.95
+    harmonic_orders: tuple[int, ...] = ()
+    theta_harmonics: bool = False
+    n_mu: int = 48
+    n_mu_d: int = 8
+    max_episodes: int = 4
+    ar_order_max: int = 1
+    window_sigmas: float = 20.0
+
+    def __post_init__(self) -> None:
+        if not 0.5 <= float(self.confidence) < 1.0:
+            raise ParameterError("confidence", self.confidence, "a level in [0.5, 1)")
+        if int(self.n_mu) < 8 or int(self.n_mu_d) < 2:
+            raise ParameterError("n_mu", (self.n_mu, self.n_mu_d), "grids of >= 8 and >= 2")
+
+
+@dataclass
+class Inference:
+    """Result of :func:`infer_mu` (SI; None where a bound does not exist, see ``status``)."""
+
+    mu_low: float | None
+    mu_high: float | None
+    mu_hat: float | None
+    mu_d: float | None
+    mu_d_low: float | None
+    mu_d_high: float | None
+    status: str
+    confidence: float
+    t_slip: float | None
+    beta_model: np.ndarray              #: model beta [rad] at (mu_hat, mu_d) incl. nuisances
+    beta_model_low: np.ndarray | None   #: model beta at the lower bound [rad]
+    beta_model_high: np.ndarray | None  #: model beta at the upper bound [rad]
+    residual: np.ndarray                #: measured - best model [rad]
+    details: dict = field(default_factory=dict)
+
+
+def signed_mu_req(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float,
+                  direction: int) -> np.ndarray:
+    """q = (l - d/5) (-s omega_dot) / (l omega^2) [-]: mu_req, positive when it pushes along s."""
+    w2 = np.maximum(np.asarray(omega, float) ** 2, 1e-12)
+    return (l - d / 5.0) * (-float(direction) * np.asarray(omega_dot, float)) / (l * w2)
+
+
+def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
+                      mu_d: np.ndarray, direction: int, d_over_l: float, *,
+                      max_episodes: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Displacement along the slip direction D [rad] for candidate pairs (mu, mu_d).
+
+    Args:
+        t: uniform times [s] (N,); the ball is stuck at t[0].
+        q: signed mu_req (N,) [-], see :func:`signed_mu_req`.
+        omega: ABU speed (N,) [rad/s].
+        mu, mu_d: (M,) candidate static and sliding coefficients [-].
+        direction: slip direction s (+1 / -1).
+        d_over_l: ball diameter / path radius [-].
+
+    Returns:
+        (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
+    """
+    mu = np.asarray(mu, float)[:, None]
+    mud = np.asarray(mu_d, float)[:, None]
+    n = t.size
+    h = float(t[1] - t[0])
+    idx = np.arange(n)[None, :]
+    w = np.asarray(omega, float)[None, :]
+    qq = np.asarray(q, float)[None, :]
+    g = w * w * (qq - mud) / 1.4                             # (M, N) drive of u' [rad/s^2]
+    c = mud * float(direction) * w * (2.0 - 0.2 * d_over_l) / 1.4   # u' = g - c u
+    cumc = np.concatenate([np.zeros((mu.shape[0], 1)),
+                           np.cumsum(0.5 * (c[:, 1:] + c[:, :-1]) * h, axis=1)], axis=1)
+    cumc -= cumc[:, :1]
+    e = np.exp(np.clip(cumc, -50.0, 50.0))                   # integrating factor
+    eg = e * g
+    inc = 0.5 * (eg[:, 1:] + eg[:, :-1]) * h
+    cs = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(inc, axis=1)], axis=1)
+    above = qq > mu                                          # (M, N) slip condition
+    disp = np.zeros((mu.shape[0], n))
+    onset_first = np.full(mu.shape[0], np.inf)
+    rows = np.arange(mu.shape[0])
+    start = np.zeros(mu.shape[0], dtype=int)                 # search onsets from here
+    for _ in range(int(max_episodes)):
+        cand = above & (idx >= start[:, None])
+        has = cand.any(axis=1)
+        if not has.any():
+            break
+        i_s = np.where(has, np.argmax(cand, axis=1), n)
+        # sub-sample onset between i_s - 1 and i_s (q crosses mu there)
+        prev = np.clip(i_s - 1, 0, n - 1)
+        ii = np.clip(i_s, 0, n - 1)
+        q0, q1 = q[prev], q[ii]
+        frac = np.where((i_s > start) & (q1 > q0),
+                        (mu[:, 0] - q0) / np.where(q1 > q0, q1 - q0, 1.0), 1.0)
+        frac = np.clip(frac, 0.0, 1.0)
+        delta = (1.0 - frac) * h                             # time from onset to t[i_s]
+        t_on = t[ii] - delta
+        onset_first = np.where(np.isinf(onset_first) & has, t_on, onset_first)
+        g_on = np.asarray(omega, float)[prev] ** 2 * (mu[:, 0] - mud[:, 0]) / 1.4
+        u_is = 0.5 * (g_on + g[rows, ii]) * delta             # slip speed at t[i_s]
+        d_is = 0.5 * u_is * delta
+        # u_n = [E_is u_is + CS_n - CS_is] / E_n for n >= i_s
+        base = e[rows, ii] * u_is - cs[rows, ii]
+        u = (base[:, None] + cs) / e
+        live = (idx >= i_s[:, None]) & has[:, None]
+        stop = live & (u < 0.0)
+        stop_any = stop.any(axis=1)
+        j = np.where(stop_any, np.argmax(stop, axis=1), n)  # first re-stick sample
+        u = np.where(live & (idx < j[:, None]), u, 0.0)
+        # displacement: trapezoid of u from t[i_s] on, plus the partial first interval
+        du = 0.5 * (u[:, 1:] + u[:, :-1]) * h
+        cd = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(du, axis=1)], axis=1)
+        cd = cd - cd[rows, ii][:, None]
+        ep = np.where(idx >= i_s[:, None], d_is[:, None] + cd, 0.0)
+        ep = np.where(has[:, None], ep, 0.0)
+        disp = disp + ep
+        # after the re-stick the next episode starts at j (or ends the record)
+        start = np.where(stop_any & has, j, n)
+    return disp, onset_first
+
+
+def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...],
+                     with_theta: bool) -> np.ndarray:
+    cols = [np.ones_like(phi)]
+    for k in orders:
+        cols += [np.sin(k * phi), np.cos(k * phi)]
+        if with_theta:
+            cols += [np.sin(k * theta), np.cos(k * theta)]
+    return np.stack(cols, axis=1)
+
+
+class _Gls:
+    """Least squares with nuisance columns profiled out, after AR(1) pre-whitening."""
+
+    def __init__(self, y: np.ndarray, x: np.ndarray, rho: float):
+        self.rho = float(rho)
+        self.yw = self.whiten(y[None, :])[0]
+        xw = self.whiten(x.T).T
+        # orthonormal basis of the whitened nuisance columns (drop collinear ones)
+        u, s, _ = np.linalg.svd(xw, full_matrices=False)
+        self.q = u[:, s > s[0] * 1e-9]
+
+    def whiten(self, a: np.ndarray) -> np.ndarray:
+        if self.rho == 0.0:
+            return a
+        out = np.empty_like(a)
+        out[:, 0] = a[:, 0] * math.sqrt(1.0 - self.rho ** 2)
+        out[:, 1:] = a[:, 1:] - self.rho * a[:, :-1]
+        return out
+
+    def rss(self, model: np.ndarray) -> np.ndarray:
+        """Residual sum of squares (whitened) of y - model - nuisances for each row of model."""
+        r = self.yw[None, :] - self.whiten(model)
+        proj = r @ self.q
+        return np.einsum("ij,ij->i", r, r) - np.einsum("ij,ij->i", proj, proj)
+
+    def fit(self, model: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Nuisance-fitted model curve (unwhitened) for one model row."""
+        r = self.yw - self.whiten(model[None, :])[0]
+        coef = np.linalg.lstsq(self.whiten(x.T).T, r, rcond=None)[0]
+        return model + x @ coef
+
+
+def noise_level(res: np.ndarray) -> float:
+    """Robust white-noise sigma of a residual [rad] (MAD of first differences / sqrt 2)."""
+    dr = np.diff(res)
+    return float(1.4826 * np.median(np.abs(dr - np.median(dr))) / math.sqrt(2.0)) or 1e-12
+
+
+def _ar1(res: np.ndarray) -> float:
+    r = res - res.mean()
+    den = float(r @ r)
+    if den <= 0:
+        return 0.0
+    return float(np.clip((r[1:] @ r[:-1]) / den, 0.0, 0.99))
+
+
+def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.ndarray,
+             omega_dot: np.ndarray, sigma_omega: np.ndarray, sigma_omega_dot: np.ndarray,
+             bias_omega_dot: np.ndarray, trusted: np.ndarray, *, l: float, d: float,
+             direction: int, lost: np.ndarray | None = None,
+             deviation: np.ndarray | None = None,
+             options: InferenceOptions | None = None) -> Inference:
+    """Confidence sets on mu and mu_d from beta(t) and the measured kinematics.
+
+    Args:
+        time: uniform times [s]; theta, beta: measured angles [rad] (beta with its harmonics).
+        omega, omega_dot, sigma_omega, sigma_omega_dot, bias_omega_dot: kinematics and their
+            1-sigma noise and truncation bounds [rad/s, rad/s^2].
+        trusted: (N,) bool, one contiguous run where the kinematics hold.
+        l, d: path radius and ball diameter [m].
+        direction: slip direction s of beta (+1 / -1).
+        lost: (N,) bool, frames where the ball or CD marker was interpolated.
+        deviation: (N,) smoothed deviation of the harmonic-cleaned beta from its stick value
+            along the slip direction [rad] (``interval``); it sets the end of the fit window.
+    """
+    opt = options or InferenceOptions()
+    idx = np.flatnonzero(trusted)
+    i0, i1 = int(idx[0]), int(idx[-1]) + 1
+    t = np.asarray(time, float)[i0:i1]
+    th = np.asarray(theta, float)[i0:i1]
+    y = np.asarray(beta, float)[i0:i1]
+    w = np.asarray(omega, float)[i0:i1]
+    q = signed_mu_req(w, np.asarray(omega_dot, float)[i0:i1], l, d, direction)
+    s = int(direction)
+    x = _harmonic_design(th, y + th, tuple(opt.harmonic_orders), opt.theta_harmonics)
+    run_max = np.maximum.accumulate(q)
+    q_first, q_top = float(max(q[0], 1e-6)), float(run_max[-1])
+    level = float(opt.confidence)
+    crit = float(chdtri(1, 1.0 - level))  # chi^2_1 quantile at the level
+    z = float(ndtri(0.5 + 0.5 * level))
+    full = np.zeros(len(beta))
+
+    mcache: dict = {}
+
+    def models(mu: np.ndarray, mud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Model displacement rows for candidate pairs (cached; computed per distinct mu on
+        the columns from just before that mu's first onset: before it the ball sticks)."""
+        keys = [(float(a), float(b), t.size) for a, b in zip(mu, mud)]
+        missing = sorted({k for k in keys if k not in mcache})
+        by_mu: dict = {}
+        for k in missing:
+            by_mu.setdefault(k[0], []).append(k)
+        for mu_k, ks in by_mu.items():
+            above = np.flatnonzero(q > mu_k)
+            c0 = max(int(above[0]) - 1, 0) if above.size else t.size
+            rows = np.zeros((len(ks), t.size))
+            onset = np.full(len(ks), np.inf)
+            if c0 < t.size - 1:
+                disp, onset = slip_displacement(
+                    t[c0:], q[c0:], w[c0:], np.full(len(ks), mu_k),
+                    np.array([k[1] for k in ks]), s, d / l, max_episodes=opt.max_episodes)
+                rows[:, c0:] = s * disp
+            for r, k in enumerate(ks):
+                mcache[k] = (rows[r], float(onset[r]))
+        out = [mcache[k] for k in keys]
+        return np.array([o[0] for o in out]), np.array([o[1] for o in out])
+
+    # candidate mu: from just below the first trusted q to above the record's maximum
+    lo_mu = 0.9 * q_first if q[0] > 0 else max(q_top * 1e-3, 1e-6)
+    hi_mu = q_top * 1.001 if q_top > 0 else 1e-3
+    if hi_mu <= lo_mu:
+        hi_mu = lo_mu * 1.01
+    ratios = np.linspace(MU_D_RATIO[0], MU_D_RATIO[1], int(opt.n_mu_d))
+
+    cache: dict = {}
+
+    def profile(mu_grid: np.ndarray, gls: _Gls, ratio_grid: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        # profile RSS over mu_d for each mu; values already computed for this fit are reused
+        key = (gls, ratio_grid.size)
+        known = cache.setdefault(key, {})
+        new = np.array([m for m in mu_grid if float(m) not in known])
+        if new.size:
+            mu_all = np.repeat(new, ratio_grid.size)
+            mud_all = mu_all * np.tile(ratio_grid, new.size)
+            m, _ = models(mu_all, mud_all)
+            rss = gls.rss(m).reshape(new.size, ratio_grid.size)
+            j = np.argmin(rss, axis=1)
+            # refine mu_d around each minimum (a coarse mu_d grid would inflate the profile)
+            step = float(ratio_grid[1] - ratio_grid[0]) if ratio_grid.size > 1 else 0.1
+            offs = np.linspace(-step, step, 5)
+            r_loc = np.clip(ratio_grid[j][:, None] + offs[None, :], MU_D_RATIO[0], MU_D_RATIO[1])
+            m, _ = models(np.repeat(new, offs.size), (new[:, None] * r_loc).ravel())
+            rss2 = gls.rss(m).reshape(new.size, offs.size)
+            for k, mu_k in enumerate(new):
+                jj = int(np.argmin(rss2[k]))
+                val, rat = float(rss2[k, jj]), float(r_loc[k, jj])
+                if 0 < jj < offs.size - 1:
+                    # parabola through the three points around the minimum
+                    y0, y1, y2 = rss2[k, jj - 1: jj + 2]
+                    den = y0 - 2.0 * y1 + y2
+                    # only where the RSS is smooth in mu_d (no onset jump between points)
+                    if den > 0 and min(y0, y2) - y1 < 0.05 * y1:
+                        val = float(max(y1 - 0.125 * (y2 - y0) ** 2 / den,
+                                        y1 - (min(y0, y2) - y1)))
+                        rat = float(np.clip(r_loc[k, jj] + 0.5 * (y0 - y2) / den
+                                            * (offs[1] - offs[0]),
+                                            r_loc[k, jj - 1], r_loc[k, jj + 1]))
+                known[float(mu_k)] = (min(val, float(rss[k, j[k]])), rat)
+        vals = [known[float(m)] for m in mu_grid]
+        return np.array([v[0] for v in vals]), np.array([v[1] for v in vals])
+
+    mu_grid = np.unique(np.r_[np.geomspace(lo_mu, hi_mu, int(opt.n_mu)), hi_mu * 1.05])
+    # The information on mu is in the stick stretch and the first few mrad of slip; far into
+    # the slip the predicted displacement (up to radians) carries the ~1 % kinematic error of q
+    # as a misfit of many noise sigmas, which the likelihood would wrongly blame on mu. So the
+    # fit window ends where the data (harmonic-cleaned, smoothed) have moved
+    # ``window_sigmas`` white-noise sigmas of beta from the stick level.
+    n_fit = t.size
+    if deviation is not None:
+        sig_b = noise_level(y)
+        dev = np.asarray(deviation, float)[i0:i1]
+        moved = np.flatnonzero(dev > opt.window_sigmas * sig_b)
+        if moved.size:
+            n_fit = int(moved[0]) + 1
+    n_fit = max(n_fit, min(t.size, 2 * x.shape[1] + 40))
+    t, th, y, w, q, x = t[:n_fit], th[:n_fit], y[:n_fit], w[:n_fit], q[:n_fit], x[:n_fit]
+    gls = _Gls(y, x, 0.0)
+    rss, rbest = profile(mu_grid, gls, ratios)
+    best = int(np.argmin(rss))
+    m_best, _ = models(mu_grid[best: best + 1], mu_grid[best: best + 1] * rbest[best: best + 1])
+    rho = 0.0
+    if opt.ar_order_max >= 1:
+        fitted = gls.fit(m_best[0], x, y)
+        rho = _ar1(y - fitted)
+        gls = _Gls(y, x, rho)
+        rss, _ = profile(mu_grid, gls, ratios)
+    # refine: a finer mu grid around the profile's acceptance region and minimum
+    for _ in range(2):
+        best = int(np.argmin(rss))
+        sig2 = float(rss[best]) / max(t.size - x.shape[1] - 2, 1)
+        stat = (rss - rss[best]) / sig2
+        ok = np.flatnonzero(stat <= crit)
+        a = mu_grid[max(ok[0] - 1, 0)]
+        b = mu_grid[min(ok[-1] + 1, mu_grid.size - 1)]
+        extra = np.geomspace(a, b, int(opt.n_mu)) if b > a else np.array([a])
+        mu_grid = np.unique(np.r_[mu_grid, extra])
+        rss, rbest = profile(mu_grid, gls, ratios)
+    best = int(np.argmin(rss))
+    sig2 = float(rss[best]) / max(t.size - x.shape[1] - 2, 1)
+    stat = (rss - rss[best]) / sig2
+    ok = np.flatnonzero(stat <= crit)
+    mu_hat = float(mu_grid[best])
+    no_slip_ok = bool(mu_grid[ok[-1]] >= q_top)       # "never slips" not rejected
+    at_start_ok = bool(mu_grid[ok[0]] <= q_first)     # "slipping from the start" not rejected
+    m_lo_b, m_hi_b = float(mu_grid[ok[0]]), float(mu_grid[ok[-1]])
+
+    # mu_d: profile over mu on a finer ratio grid near the best mu
+    near = mu_grid[ok] if ok.size <= 12 else mu_grid[ok][np.linspace(0, ok.size - 1, 12).astype(int)]
+    fine_r = np.linspace(MU_D_RATIO[0], MU_D_RATIO[1], 36)
+    mu_all = np.repeat(near, fine_r.size)
+    mud_all = mu_all * np.tile(fine_r, near.size)
+    m_all, _ = models(mu_all, mud_all)
+    rss_d = gls.rss(m_all).reshape(near.size, fine_r.size)
+    rmin = min(float(rss_d.min()), float(rss[best]))
+    stat_d = (rss_d - rmin) / sig2
+    acc = stat_d <= crit
+    mud_acc = mud_all.reshape(near.size, fine_r.size)[acc]
+    jb = np.unravel_index(int(np.argmin(rss_d)), rss_d.shape)
+    mu_d_hat = float(near[jb[0]] * fine_r[jb[1]])
+    # if the best pair is "no slip", mu_d is not identified
+    slip_seen = not (mu_hat >= q_top)
+
+    # kinematic error of q at the slip: relative 1-sigma noise and truncation bound
+    onset_idx = None
+    m_hat, onset = models(np.array([mu_hat]), np.array([mu_d_hat if slip_seen else mu_hat]))
+    if np.isfinite(onset[0]):
+        onset_idx = int(np.clip(round((onset[0] - t[0]) / (t[1] - t[0])), 0, t.size - 1))
+    rel_noise = rel_bias = 0.0
+    if onset_idx is not None:
+        a = abs(float(omega_dot[i0 + onset_idx]))
+        wv = abs(float(omega[i0 + onset_idx]))
+        if a > 0 and wv > 0:
+            rel_noise = math.hypot(float(sigma_omega_dot[i0 + onset_idx]) / a,
+                                   2.0 * float(sigma_omega[i0 + onset_idx]) / wv)
+            rel_bias = float(bias_omega_dot[i0 + onset_idx]) / a
+
+    def widen(bound: float, sign: int) -> float:
+        hw = abs(bound - mu_hat)
+        k = math.hypot(hw, z * rel_noise * mu_hat) + rel_bias * mu_hat
+        return mu_hat + sign * k
+
+    status = "ok"
+    mu_low = None if at_start_ok else widen(m_lo_b, -1)
+    mu_high = None if no_slip_ok else widen(m_hi_b, +1)
+    if no_slip_ok and at_start_ok:
+        status = "no bound: the data fit both a ball slipping from the start and one never slipping"
+    elif no_slip_ok:
+        status = "no slip in the trusted region: only a lower bound"
+    elif at_start_ok:
+        status = "slip before or at the start of the trusted region: only an upper bound"
+    lost_note = None
+    if lost is not None and np.any(lost):
+        lost_t = np.asarray(time, float)[np.asarray(lost, bool)]
+        # onset times allowed by the confidence set, +- 2 ms
+        _, on_lo = models(np.array([m_lo_b]), np.array([m_lo_b]))
+        _, on_hi = models(np.array([m_hi_b]), np.array([m_hi_b * MU_D_RATIO[0]]))
+        ta = on_lo[0] if np.isfinite(on_lo[0]) else t[0]
+        tb = on_hi[0] if np.isfinite(on_hi[0]) else t[-1]
+        if np.any((lost_t >= min(ta, tb) - 0.002) & (lost_t <= max(ta, tb) + 0.002)):
+            lost_note = "markers lost (interpolated) across the slip: no bound"
+            mu_low = mu_high = None
+            status = lost_note
+    mud_lo = float(mud_acc.min()) if slip_seen and mud_acc.size else None
+    mud_hi = float(mud_acc.max()) if slip_seen and mud_acc.size else None
+    if mud_lo is not None:
+        # the same kinematic error scales mu_d
+        mud_lo = mud_lo * (1.0 - z * rel_noise - rel_bias)
+        mud_hi = mud_hi * (1.0 + z * rel_noise + rel_bias)
+
+    def curve(mu: float | None, mud: float | None) -> np.ndarray | None:
+        if mu is None:
+            return None
+        m, _ = models(np.array([mu]), np.array([mud]))
+        out = full.copy() * np.nan
+        out[i0:i0 + t.size] = gls.fit(m[0], x, y)
+        return out
+
+    best_curve = curve(mu_hat, mu_d_hat if slip_seen else mu_hat)
+    residual = np.asarray(beta, float) - best_curve
+    return Inference(
+        mu_low=mu_low, mu_high=mu_high, mu_hat=mu_hat if slip_seen else None,
+        mu_d=mu_d_hat if slip_seen else None, mu_d_low=mud_lo, mu_d_high=mud_hi,
+        status=status, confidence=level,
+        t_slip=float(onset[0]) if slip_seen and np.isfinite(onset[0]) else None,
+        beta_model=best_curve,
+        beta_model_low=curve(m_lo_b, m_lo_b) if mu_low is not None else None,
+        beta_model_high=curve(m_hi_b, m_hi_b * MU_D_RATIO[0]) if mu_high is not None else None,
+        residual=residual,
+        details={"ar1_rho": rho, "sigma_white_rad": math.sqrt(sig2),
+                 "chi2_critical": crit, "profile_mu_low": m_lo_b, "profile_mu_high": m_hi_b,
+                 "kinematic_rel_sigma_at_slip": rel_noise,
+                 "kinematic_rel_bias_at_slip": rel_bias,
+                 "harmonic_orders": list(opt.harmonic_orders),
+                 "theta_harmonics": opt.theta_harmonics,
+                 "mu_d_ratio_range": list(MU_D_RATIO), "candidates": int(mu_grid.size)})
