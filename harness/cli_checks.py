@@ -29,6 +29,9 @@ MAX_SPEED_HZ = 1000.0
 MAX_LOOP_PHASE = 0.1
 #: The ramp must run this many communication steps before the slip it measures.
 MIN_STEPS_BEFORE_SLIP = 10
+#: Earliest ramp slip [s] accepted with error-controlled steps: the eq. 4.1/4.2 estimate was exact
+#: (1e-15 relative) down to a slip at 3.3e-9 s and 0 at 3.3e-10 s (jerk 1e11 rad/s^3).
+MIN_T_SLIP_S = 1e-7
 #: Pre-roll of a staircase run before t0 [s] (harness.experiments.PRE_ROLL).
 PRE_ROLL_S = 0.05
 #: Largest setpoint step [Hz] of table41 (the report's is 1 Hz).
@@ -129,6 +132,8 @@ def check_ramp(args: argparse.Namespace) -> None:
     """Options of ``abu simulate --motion ramp``."""
     check_plant(args)
     w0 = _speed("--omega0-hz", args.omega0_hz) * HZ
+    if w0 == 0:
+        raise ParameterError("--omega0-hz", args.omega0_hz, "a non-zero speed [Hz]")
     jerk = positive("--jerk", args.jerk, "rad/s^3")
     t_end = 1.0 if args.t_end is None else positive("--t-end", args.t_end, "s")
     in_range("--t-end", t_end, 0.0, MAX_SIM_TIME_S, "s", "simulated time")
@@ -144,6 +149,11 @@ def check_ramp(args: argparse.Namespace) -> None:
                              f"a ramp the co-simulation resolves: with it the ball slips at "
                              f"t = {t_slip:.3g} s, within {MIN_STEPS_BEFORE_SLIP} communication "
                              f"steps of {h:g} s (lower --jerk or --comm-step)")
+    if t_slip < MIN_T_SLIP_S:
+        raise ParameterError("--jerk", jerk,
+                             f"a ramp the co-simulation resolves: with it the ball slips at "
+                             f"t = {t_slip:.3g} s, below the {MIN_T_SLIP_S:g} s the master "
+                             "resolves in time (the estimate was 0 at 3.3e-10 s)")
 
 
 def check_table41(args: argparse.Namespace) -> None:

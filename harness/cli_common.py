@@ -174,6 +174,7 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
     args._parser = _subparser(parser, command)
     use_run_tempdir()
     try:
+        check_float_options(args._parser, args)
         return int(args.func(args) or 0)
     except ParameterError as exc:
         if rename is not None:
@@ -195,6 +196,18 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
         raise
     except BaseException as exc:  # noqa: BLE001 - the last line of defence: no traceback
         return _internal(command, args, exc, debug)
+
+
+def check_float_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Every ``type=float`` option holds finite numbers (no option here means anything by inf or
+    NaN, and they would otherwise travel into a computation)."""
+    for action in parser._actions:
+        if action.type is not float or not action.option_strings:
+            continue
+        value = getattr(args, action.dest, None)
+        for v in value if isinstance(value, list) else [value]:
+            if v is not None and not math.isfinite(v):
+                raise ParameterError(action.option_strings[0], v, "a finite number")
 
 
 def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:

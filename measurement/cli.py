@@ -21,9 +21,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from abu_model.atomic_io import atomic_write_text
-from abu_model.errors import ParameterError
-from harness.cli_common import (MAX_BINS, AbuArgumentParser, add_overwrite, in_range,
-                                integer_range, option_error, positive, run_command)
+from abu_model.errors import AbuError, ParameterError
+from harness.cli_common import (MAX_BINS, AbuArgumentParser, add_overwrite, count_limit,
+                                in_range, integer_range, option_error, positive, run_command)
 from harness.output_tx import check_not_inside, output_folder
 
 from .input_checks import check_motion_and_roles, check_sampling
@@ -37,6 +37,7 @@ COMBINED_KIND = "abu-measure-summary-combined"
 MAX_MC_DRAWS = 100_000
 MAX_POLY_DEGREE = 30
 MAX_FPS = 1.0e7
+MAX_RECORD_S = 100.0
 DEFAULT_L = 1.15e-2
 DEFAULT_D = 3.0e-3
 
@@ -115,7 +116,10 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
     if check is not None:
         check(len(rec))
     if args.seeds is not None:
-        seeds = parse_seeds(args.seeds)
+        try:
+            seeds = parse_seeds(args.seeds)
+        except AbuError as exc:
+            raise AbuError(f"--seeds: {exc}") from None
         roles_note = "given by --seeds"
     else:
         seeds, roles = find_markers(np.asarray(frames[0]), dark=args.dark_markers,
@@ -207,6 +211,9 @@ def _analysis_options(args: argparse.Namespace):
 
 
 def _check_tracking_options(args: argparse.Namespace) -> None:
+    from .tracking import METHODS
+    if args.method not in METHODS:
+        raise ParameterError("--method", args.method, f"one of {', '.join(METHODS)}")
     positive("--fps", args.fps, "frames/s", allow_none=True)
     if args.fps is not None:
         in_range("--fps", args.fps, 1.0, MAX_FPS, "frames/s",
@@ -358,8 +365,25 @@ def _describe_multi(r: dict) -> str:
 
 # ------------------------------------------------------------------------------ render
 
+def _check_render_options(args: argparse.Namespace) -> None:
+    """Limits of a rendered recording, before simulating and rendering it."""
+    from .frames_io import MAX_FRAMES, MAX_PIXELS
+    integer_range("--frames", args.frames, 1, MAX_FRAMES,
+                  "frames held in memory; the report's camera stores 3072 per run")
+    in_range("--fps", args.fps, 1.0, MAX_FPS, "frames/s",
+             "high-speed cameras record up to about 1e6 frames/s")
+    size = getattr(args, "size", 256)
+    if isinstance(size, int):
+        integer_range("--size", size, 16, 4096, "frame width and height [px]")
+        count_limit("--frames", args.frames, args.frames * size * size, MAX_PIXELS,
+                    "pixels", "the recording is rendered in memory")
+    count_limit("--frames", args.frames, args.frames / args.fps, MAX_RECORD_S, "s of recording",
+                "each frame is simulated and rendered; the report's record lasts 0.68 s")
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     """``abu render --out DIR``: render the digital twin of the report's experiment."""
+    _check_render_options(args)
     out = Path(args.out)
     if getattr(args, "scenario", "report") == "random":
         if getattr(args, "drive", None):
