@@ -54,7 +54,9 @@ class ReferenceResult:
     mode: np.ndarray
     mu_req: np.ndarray
     switches: list[Switch] = field(default_factory=list)
-    mu_low: float = 0.0          #: largest mu_req while stuck before the first slip [-]
+    #: largest mu_req while stuck before the first slip [-]; None if the ball slips at (or
+    #: before) the first breakpoint (setpoint step): no stick period with an acceleration
+    mu_low: float | None = 0.0
     mu_high: float | None = None  #: mu_req right after the first slip instant [-]
     t_slip: float | None = None   #: first stick -> slip time [s]
     omega_slip: float | None = None  #: [rad/s]
@@ -155,7 +157,8 @@ def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
     mu_req = np.array([mu_required(ball, a, w) for a, w in zip(alpha, Y[:, 1])])
     result = ReferenceResult(np.array(times), Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], alpha, mm,
                              mu_req, switches)
-    _bounds(result)
+    later = [b for b in breakpoints if b > t_start]
+    _bounds(result, min(later) if later else None)
     return result
 
 
@@ -165,13 +168,14 @@ def _segments(breakpoints: Sequence[float], t_start: float, t_end: float):
     return list(zip(cuts[:-1], cuts[1:]))
 
 
-def _bounds(result: ReferenceResult) -> None:
+def _bounds(result: ReferenceResult, first_break: float | None = None) -> None:
     """mu_low, mu_high and the slip instant from the recorded points.
 
     Records at the slip instant come in the order [left limit,] right limit (stick mode,
     the new acceleration), switch (slip mode). mu_high is mu_req at the right limit; mu_low
     is the largest mu_req of the stick records before it, and includes the right limit itself
-    when the slip is continuous (no jump of alpha there), where mu_low = mu_high = mu.
+    when the slip is continuous (no jump of alpha there), where mu_low = mu_high = mu. A slip
+    at or before ``first_break`` [s] gives mu_low = None (no lower bound).
     """
     first = next((s for s in result.switches if s.from_mode == Mode.STICK), None)
     stuck = result.mode == Mode.STICK
@@ -190,6 +194,8 @@ def _bounds(result: ReferenceResult) -> None:
     result.omega_slip = float(result.omega[j])
     result.alpha_slip = float(result.alpha[j])
     result.mu_high = float(result.mu_req[j])
+    if first_break is not None and first.time <= first_break + 1e-9:
+        result.mu_low = None
 
 
 class _Segment(Protocol):

@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -28,6 +29,7 @@ HZ = 2.0 * math.pi
 
 #: Library parameter name -> command-line option (for error messages).
 OPTION_OF = {"te": "--te", "t0": "--t0", "t_end": "--t-end", "comm_step": "--comm-step",
+             "tol": "--tol",
              "zeta": "--zeta", "omega_n": "--omega-n", "mu": "--mu", "mu_d": "--mu-d",
              "m": "--m", "d": "--d", "l": "--l", "J_abu": "--j-abu", "tau_motor": "--tau-motor",
              "beta0": "--beta0", "jerk": "--jerk", "rounding": "--rounding",
@@ -118,7 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="growth rate K of |omega_dot| [rad/s^3] (default 3000)")
     _add_plant_options(p)
     g = p.add_argument_group("run")
-    g.add_argument("--comm-step", type=float, default=1e-3, help="communication step [s] (default 0.001)")
+    g.add_argument("--comm-step", type=float, default=None,
+                   help="fixed communication step [s] (without --tol: fixed-step mode; default: "
+                        "error-controlled steps)")
+    g.add_argument("--tol", type=float, default=None,
+                   help="coupling error tolerance [-] of the error-controlled steps (default "
+                        "1e-5: bounds within about 1e-6 relative; see docs/harness.md)")
     g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built there if missing; "
                                                    "default: a temporary build)")
     g.add_argument("--out", default=None, help="write result.csv, summary.json and PNG plots here")
@@ -217,7 +224,8 @@ def staircase_from_args(args: argparse.Namespace):
         return StaircaseExperiment(
             _plant(args), w0 * HZ, we * HZ, t0=args.t0, te=args.te, t_end=args.t_end,
             step=step * HZ, rounding=args.rounding, theta_ref_mode=args.theta_ref,
-            zeta=args.zeta, omega_n=args.omega_n, comm_step=args.comm_step, beta0=args.beta0)
+            zeta=args.zeta, omega_n=args.omega_n, comm_step=args.comm_step, beta0=args.beta0,
+            tol=args.tol)
     except ParameterError as exc:
         raise _renamed(exc) from None
 
@@ -232,7 +240,7 @@ def ramp_from_args(args: argparse.Namespace):
     try:
         return RampExperiment(_plant(args), w0 * HZ, args.jerk,
                               1.0 if args.t_end is None else args.t_end,
-                              comm_step=args.comm_step, beta0=args.beta0)
+                              comm_step=args.comm_step, beta0=args.beta0, tol=args.tol)
     except ParameterError as exc:
         raise _renamed(exc) from None
 
@@ -320,6 +328,7 @@ def cmd_table41(args: argparse.Namespace) -> int:
         # closed form first (cheap): its speeds must be ones an ABU reaches before co-simulating
         check_table41_speeds(table41(args.mu, theta_ref_mode=args.theta_ref, t_step=args.t_step,
                                      step_hz=args.step_hz, check=False))
+        started = time.perf_counter()
         rows = table41(args.mu, theta_ref_mode=args.theta_ref, t_step=args.t_step,
                        step_hz=args.step_hz, check=not args.no_check, fmu_dir=args.fmu_dir)
     except ParameterError as exc:
@@ -327,6 +336,7 @@ def cmd_table41(args: argparse.Namespace) -> int:
     if args.json:
         from .results_io import to_jsonable
         print(json.dumps(to_jsonable([r.as_dict() for r in rows]), indent=2, allow_nan=False))
+        print(f"wall time {time.perf_counter() - started:.2f} s", file=sys.stderr)
         return 0
     print(f"{'mu [-]':>12} {'omega0 [Hz]':>12} {'threshold [Hz]':>15} {'jump [rad/s^2]':>15} "
           f"{'report [Hz]':>12} {'checked':>8}")
@@ -335,6 +345,7 @@ def cmd_table41(args: argparse.Namespace) -> int:
         checked = {None: "-", True: "yes", False: "NO"}[r.consistent]
         print(f"{r.mu:>12.4g} {r.omega0_hz:>12d} {r.threshold_hz:>15.4f} {r.jump_rad_s2:>15.4f} "
               f"{'' if report is None else report:>12} {checked:>8}")
+    print(f"wall time {time.perf_counter() - started:.2f} s")
     return 0
 
 
@@ -406,12 +417,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise _renamed(exc) from None
     with output_file(out, overwrite=args.overwrite) as tmp:  # locked before the runs
         build_fmus(fmu_dir)
+        started = time.perf_counter()
         rows = run_sweep(points, base, fmu_dir, scheduler=args.scheduler,
                          workers=args.workers, progress=args.progress)
+        wall = time.perf_counter() - started
         write_sweep_csv(tmp, rows)
     bracketed = sum(r["bracketed"] for r in rows)
     slipped = sum(r["slipped"] for r in rows)
-    print(f"{len(rows)} runs: {slipped} slipped, {bracketed} bracket mu; wrote {out}")
+    print(f"{len(rows)} runs: {slipped} slipped, {bracketed} bracket mu; wrote {out} "
+          f"(wall time {wall:.2f} s)")
     return 0
 
 

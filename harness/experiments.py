@@ -22,8 +22,9 @@ from abu_model.params import PlantParams, check_finite
 from controller.pi import PISpeedController
 from controller.reference import ROUNDINGS, Staircase
 
-from .master import CoSimResult, CoSimulation
-from .system import Component, Connection, Source, System
+from .master import CoSimResult
+from .reuse import run_system
+from .system import Component, Connection, Hold, Source, System
 
 FMU_FILES = ("AbuBall", "SpeedController", "Staircase")
 
@@ -99,6 +100,41 @@ def _plant_parameters(plant: PlantParams) -> dict[str, Any]:
             "tau_motor": plant.tau_motor, "ball_reaction": plant.ball_reaction}
 
 
+def _check_stepping(exp: Any) -> None:
+    """comm_step and tol of an experiment: None or finite and > 0."""
+    for name, expected in (("comm_step", "a communication step > 0 s"),
+                           ("tol", "a coupling error tolerance > 0")):
+        value = getattr(exp, name)
+        if value is not None:
+            value = check_finite(name, value)
+            if value <= 0.0:
+                raise ParameterError(name, value, expected)
+            object.__setattr__(exp, name, value)
+
+
+def _effective_tol(exp: Any) -> float | None:
+    """The tolerance the master uses (None: fixed steps)."""
+    from .stepping import DEFAULT_TOL
+    if exp.tol is not None:
+        return exp.tol
+    return DEFAULT_TOL if exp.comm_step is None else None
+
+
+_INPUTS_OF: dict[tuple[str, int], frozenset[str]] = {}
+
+
+def _has_input(fmu: Path, name: str) -> bool:
+    """True if the FMU file has an input variable ``name`` (read once per file version)."""
+    import fmpy
+
+    path = Path(fmu)
+    key = (str(path.resolve()), path.stat().st_mtime_ns)
+    if key not in _INPUTS_OF:
+        md = fmpy.read_model_description(str(path), validate=False)
+        _INPUTS_OF[key] = frozenset(v.name for v in md.modelVariables if v.causality == "input")
+    return name in _INPUTS_OF[key]
+
+
 # ---------------------------------------------------------------------------- results
 @dataclass
 class ExperimentResult:
@@ -144,14 +180,16 @@ def _switches(res: CoSimResult, table: Mapping[str, np.ndarray]) -> list[dict[st
     return out
 
 
-def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, Any]]
-                    ) -> dict[str, Any]:
+def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, Any]],
+                    first_step: float | None = None) -> dict[str, Any]:
     """mu_low, mu_high and the slip instant of a recorded run (DESIGN.md sec. 3).
 
     mu_low is the largest mu_req recorded before the first stick -> slip switch, including the
     left limit at the slip instant; mu_high is mu_req at the right limit there (the last row
     at that time). If alpha is continuous at the slip, both equal mu. Without a slip,
     mu_high and t_slip are None and mu_low is the largest mu_req of the whole (stuck) run.
+    A slip at or before ``first_step`` [s] (the first setpoint step) leaves no stick period
+    with an acceleration: mu_low is None (there is no lower bound).
     """
     t, side, mu_req = table["time"], table["side"], table["mu_req"]
     first = next((s for s in switches if s["from_mode"] == 0 and s["to_mode"] != 0), None)
@@ -166,6 +204,8 @@ def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, An
     right = int(at[-1])
     before = (t < t[right] - 1e-9) | ((np.abs(t - t[right]) <= 1e-9) & (side == -1))
     mu_low = float(np.max(mu_req[before])) if before.any() else 0.0
+    if first_step is not None and t_slip <= first_step + 1e-9:
+        mu_low = None
     return {"mu_low": mu_low, "mu_high": float(mu_req[right]), "t_slip": float(t_slip),
             "omega_slip": float(table["omega"][right]), "alpha_slip": float(table["alpha"][right])}
 
@@ -193,10 +233,13 @@ class StaircaseExperiment:
         rounding: ``lead`` (report), ``nearest`` or ``trail``.
         theta_ref_mode: ``integral`` (physical PI) or ``thesis`` (theta_ref = t w_ref).
         zeta, omega_n: identified closed loop [-], [rad/s].
-        comm_step: communication step [s] (> 0).
+        comm_step: fixed communication step [s] (> 0) when ``tol`` is None; the first step
+            with ``tol``; None (default) with ``tol`` None: error control at the master's
+            default tolerance.
         beta0: initial ball angle relative to the ABU [rad].
         t_start: start of the simulation [s]; None: min(0, t0 - 0.05 s), so that the table
             holds the steady state and both limits of the first step.
+        tol: coupling error tolerance [-] of the error-controlled steps (None: see comm_step).
     """
 
     plant: PlantParams
@@ -210,18 +253,17 @@ class StaircaseExperiment:
     theta_ref_mode: str = "integral"
     zeta: float = 0.5
     omega_n: float = 2.2
-    comm_step: float = 1e-3
+    comm_step: float | None = None
     beta0: float = 0.0
     t_start: float | None = None
+    tol: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.plant, PlantParams):
             raise ParameterError("plant", self.plant, "a PlantParams instance")
-        for name in ("omega0", "omega_end", "t0", "te", "step", "zeta", "omega_n", "comm_step",
-                     "beta0"):
+        for name in ("omega0", "omega_end", "t0", "te", "step", "zeta", "omega_n", "beta0"):
             object.__setattr__(self, name, check_finite(name, getattr(self, name)))
-        if self.comm_step <= 0.0:
-            raise ParameterError("comm_step", self.comm_step, "a communication step > 0 s")
+        _check_stepping(self)
         if self.rounding not in ROUNDINGS:
             raise ParameterError("rounding", self.rounding, f"one of {', '.join(ROUNDINGS)}")
         self.staircase  # validates te, step, omega_end (at least one step)
@@ -250,10 +292,24 @@ class StaircaseExperiment:
         return PISpeedController(self.zeta, self.omega_n, self.plant.J_abu, self.theta_ref_mode)
 
     def system(self, fmus: Mapping[str, Path]) -> System:
-        """The co-simulated system: Staircase -> SpeedController <-> AbuBall."""
+        """The co-simulated system: Staircase -> SpeedController <-> AbuBall.
+
+        The torque is held to second order (torque, torque_rate, torque_accel) when the
+        AbuBall FMU has the ``torque_accel`` input, else to first order; the controller's
+        integrator sees omega to the same order (omega, alpha, jerk). The holds' scales are
+        one setpoint step [rad/s] and its torque jump J_total 2 zeta wn step [N m].
+        """
         plant = _plant_parameters(self.plant)
         plant.update(theta0=self.omega0 * self.t_start, omega0=self.omega0, beta0=self.beta0,
                      beta_dot0=0.0)
+        second = _has_input(fmus["AbuBall"], "torque_accel")
+        extra = ((Connection("plant.jerk", "ctrl.jerk"),
+                  Connection("ctrl.torque_accel", "plant.torque_accel")) if second else ())
+        torque_scale = self.plant.J_total * 2.0 * self.zeta * self.omega_n * abs(self.step)
+        holds = (Hold("ctrl.torque", ("ctrl.torque_rate",) + (("ctrl.torque_accel",)
+                                                             if second else ()), torque_scale),
+                 Hold("plant.omega", ("plant.alpha",) + (("plant.jerk",) if second else ()),
+                      abs(self.step)))
         return System(
             components=(
                 Component("ref", fmus["Staircase"], {
@@ -272,8 +328,9 @@ class StaircaseExperiment:
                 Connection("plant.alpha", "ctrl.alpha"),
                 Connection("ctrl.torque", "plant.torque"),
                 Connection("ctrl.torque_rate", "plant.torque_rate"),
-            ),
+            ) + extra,
             probes={"omega_ref": "ref.omega_ref", "torque": "ctrl.torque", **_PLANT_PROBES},
+            holds=holds,
         )
 
     def as_dict(self) -> dict[str, Any]:
@@ -286,39 +343,54 @@ class StaircaseExperiment:
                 "t_start_s": self.t_start, "t_end_s": self.t_end, "step_rad_s": self.step,
                 "rounding": self.rounding, "theta_ref_mode": self.theta_ref_mode,
                 "zeta": self.zeta, "omega_n_rad_s": self.omega_n, "comm_step_s": self.comm_step,
-                "beta0_rad": self.beta0,
+                "tol": _effective_tol(self), "beta0_rad": self.beta0,
                 "step_times_s": list(self.staircase.step_times)}
 
 
 def run_staircase(exp: StaircaseExperiment, fmu_dir: Any = None,
-                  progress: bool = False) -> ExperimentResult:
-    """Co-simulate the staircase experiment and compute the friction bounds."""
+                  progress: bool = False, reuse: bool = True) -> ExperimentResult:
+    """Co-simulate the staircase experiment and compute the friction bounds.
+
+    ``reuse``: take loaded FMU instances of an earlier run of the same structure and reset
+    them (``fmi2Reset``, see :mod:`harness.reuse`) instead of loading new ones.
+    """
     fmus = ensure_fmus(fmu_dir)
-    with CoSimulation(exp.system(fmus), exp.t_start, exp.t_end, exp.comm_step,
-                      progress=progress) as sim:
-        res = sim.run()
+    res = run_system(exp.system(fmus), exp.t_start, exp.t_end, exp.comm_step, tol=exp.tol,
+                     progress=progress, reuse=reuse)
     table = _table(res)
     switches = _switches(res, table)
-    bounds = friction_bounds(table, switches)
+    step_times = exp.staircase.step_times
+    first_step = next((ts for ts in step_times if ts > exp.t_start), None)
+    bounds = friction_bounds(table, switches, first_step=first_step)
     mu = exp.plant.ball.mu
     summary: dict[str, Any] = {"experiment": exp.as_dict(), **bounds, "mu": mu,
                                "switches": switches, "slips": bounds["t_slip"] is not None}
-    step_times = exp.staircase.step_times
+    summary["end_on_setpoint_step"] = any(abs(exp.t_end - ts) <= 1e-9 for ts in step_times)
     if bounds["t_slip"] is None:
-        summary["message"] = ("the ball never slips: mu_low is a lower bound only "
-                              "(mu_high and t_slip are null)")
         summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL))
+        if summary["end_on_setpoint_step"]:
+            summary["message"] = (
+                f"no slip before t_end = {exp.t_end:.6g} s, which falls on a setpoint step: the "
+                "step itself is not simulated, so whether it makes the ball slip is open; mu_low "
+                "is a lower bound from the stick period before it (mu_high and t_slip are null); "
+                "extend t_end past the step to decide")
+        else:
+            summary["message"] = ("the ball never slips: mu_low is a lower bound only "
+                                  "(mu_high and t_slip are null)")
     else:
         at_step = any(abs(bounds["t_slip"] - ts) <= 1e-9 for ts in step_times)
         summary["slip_at_setpoint_step"] = at_step
-        # at a continuous slip mu_low = mu_high = mu up to rounding: compare with a tolerance
-        summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL)
-                                      and bounds["mu_high"] >= mu * (1 - BRACKET_RTOL))
-        if bounds["mu_low"] == 0.0:
-            summary["message"] = ("the ball slips at the first acceleration step: no stick period "
-                                  "with acceleration, mu_low = 0 carries no information; start "
-                                  "at a higher |omega0|")
+        if bounds["mu_low"] is None:
+            summary["brackets_mu"] = bool(bounds["mu_high"] >= mu * (1 - BRACKET_RTOL))
+            summary["message"] = (
+                f"the ball slips at the first setpoint step (t = {bounds['t_slip']:.6g} s): there "
+                "was no stick period with an acceleration, so there is no lower bound (mu_low is "
+                f"null), only mu < mu_high = {bounds['mu_high']:.4g}; start the staircase at a "
+                "higher |omega0| (or use smaller steps) to get one")
         else:
+            # at a continuous slip mu_low = mu_high = mu up to rounding: compare with a tolerance
+            summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL)
+                                          and bounds["mu_high"] >= mu * (1 - BRACKET_RTOL))
             summary["message"] = (f"mu_low = {bounds['mu_low']:.4g} <= mu < mu_high = "
                                   f"{bounds['mu_high']:.4g} (slip at t = {bounds['t_slip']:.6g} s)")
     return ExperimentResult(table, _finish_summary(summary, res), res)
@@ -338,21 +410,25 @@ class RampExperiment:
         omega0: initial speed [rad/s] (non-zero).
         jerk: K, growth rate of |alpha| [rad/s^3] (> 0).
         t_end: end of the simulation [s] (> 0).
-        comm_step: communication step [s] (> 0).
+        comm_step: fixed communication step [s] (> 0) when ``tol`` is None; the first step
+            with ``tol``; None with ``tol`` None: error control at the default tolerance.
         beta0: initial ball angle [rad].
+        tol: coupling error tolerance [-] (the ramp's sources are exact: steps grow to the
+            master's largest step; switches are located exactly by the plant).
     """
 
     plant: PlantParams
     omega0: float
     jerk: float
     t_end: float
-    comm_step: float = 1e-3
+    comm_step: float | None = None
     beta0: float = 0.0
+    tol: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.plant, PlantParams):
             raise ParameterError("plant", self.plant, "a PlantParams instance")
-        for name in ("omega0", "jerk", "t_end", "comm_step", "beta0"):
+        for name in ("omega0", "jerk", "t_end", "beta0"):
             object.__setattr__(self, name, check_finite(name, getattr(self, name)))
         if self.omega0 == 0.0:
             raise ParameterError("omega0", self.omega0, "a non-zero speed [rad/s]")
@@ -360,8 +436,7 @@ class RampExperiment:
             raise ParameterError("jerk", self.jerk, "a jerk K > 0 rad/s^3")
         if self.t_end <= 0.0:
             raise ParameterError("t_end", self.t_end, "a time > 0 s")
-        if self.comm_step <= 0.0:
-            raise ParameterError("comm_step", self.comm_step, "a communication step > 0 s")
+        _check_stepping(self)
 
     @property
     def torque_slope(self) -> float:
@@ -385,14 +460,15 @@ class RampExperiment:
                 "l_m": b.l, "J_abu_kg_m2": self.plant.J_abu, "tau_motor_s": self.plant.tau_motor,
                 "ball_reaction": self.plant.ball_reaction, "omega0_rad_s": self.omega0,
                 "jerk_rad_s3": self.jerk, "t_end_s": self.t_end, "comm_step_s": self.comm_step,
-                "beta0_rad": self.beta0}
+                "tol": _effective_tol(self), "beta0_rad": self.beta0}
 
 
-def run_ramp(exp: RampExperiment, fmu_dir: Any = None, progress: bool = False) -> ExperimentResult:
+def run_ramp(exp: RampExperiment, fmu_dir: Any = None, progress: bool = False,
+             reuse: bool = True) -> ExperimentResult:
     """Co-simulate the prescribed-acceleration ramp and estimate mu at the slip (eq. 4.1/4.2)."""
     fmus = ensure_fmus(fmu_dir)
-    with CoSimulation(exp.system(fmus), 0.0, exp.t_end, exp.comm_step, progress=progress) as sim:
-        res = sim.run()
+    res = run_system(exp.system(fmus), 0.0, exp.t_end, exp.comm_step, tol=exp.tol,
+                     progress=progress, reuse=reuse)
     s = math.copysign(1.0, exp.omega0)
     omega_ref = exp.omega0 + s * exp.jerk * res.time**2 / 2.0  # the prescribed speed
     table = _table(res, {"omega_ref": omega_ref})

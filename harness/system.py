@@ -83,6 +83,31 @@ class Source:
 
 
 @dataclass(frozen=True)
+class Hold:
+    """How an exchanged output is held over a communication step, for the error estimate.
+
+    ``signal`` (``"comp.output"``) is passed on together with its time derivatives
+    ``derivatives`` (outputs, first derivative first), so the receiver sees the Taylor
+    polynomial y + y' tau + y'' tau^2 / 2 + ... inside the step. The master predicts the
+    signal at the step's end with that polynomial and compares it with the value the
+    producer then outputs: the difference, divided by ``scale`` (the signal's unit; None:
+    the largest |signal| seen so far), is the step's coupling error (``tol`` controls it).
+    """
+
+    signal: str
+    derivatives: tuple[str, ...] = ()
+    scale: float | None = None
+
+    def __post_init__(self) -> None:
+        split_name(self.signal, "hold signal")
+        object.__setattr__(self, "derivatives", tuple(self.derivatives))
+        for name in self.derivatives:
+            split_name(name, "hold derivative")
+        if self.scale is not None and not (self.scale > 0.0 and self.scale < float("inf")):
+            raise ParameterError("hold scale", self.scale, "a finite scale > 0 or None")
+
+
+@dataclass(frozen=True)
 class System:
     """Components, connections, external sources and the variables to record.
 
@@ -91,18 +116,22 @@ class System:
         connections: output -> input links (each input driven at most once).
         sources: inputs driven by functions of time.
         probes: column name -> ``"comp.variable"`` recorded at every communication point.
+        holds: the exchanged signals whose hold error controls the step size (empty: every
+            continuous Real connection, taken as held constant).
     """
 
     components: tuple[Component, ...]
     connections: tuple[Connection, ...] = ()
     sources: tuple[Source, ...] = ()
     probes: Mapping[str, str] = field(default_factory=dict)
+    holds: tuple[Hold, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "components", tuple(self.components))
         object.__setattr__(self, "connections", tuple(self.connections))
         object.__setattr__(self, "sources", tuple(self.sources))
         object.__setattr__(self, "probes", dict(self.probes))
+        object.__setattr__(self, "holds", tuple(self.holds))
         names = [c.name for c in self.components]
         if not names:
             raise ParameterError("components", names, "at least one component")
@@ -126,6 +155,19 @@ class System:
             if split_name(variable, f"probe {column}")[0] not in known:
                 raise ParameterError(f"probe {column}", variable,
                                      f"a variable of a component in {sorted(known)}")
+
+        for hold in self.holds:
+            for variable in (hold.signal,) + hold.derivatives:
+                if split_name(variable)[0] not in known:
+                    raise ParameterError(f"hold {hold.signal}", variable,
+                                         f"a variable of a component in {sorted(known)}")
+
+    def structure_key(self) -> tuple:
+        """Everything but parameters and source functions: systems with equal keys can reuse
+        each other's loaded FMU instances (see :mod:`harness.reuse`)."""
+        comps = tuple((c.name, str(c.fmu.resolve())) for c in self.components)
+        return (comps, self.connections, tuple(s.dst for s in self.sources),
+                tuple(self.probes.items()), self.holds)
 
     def component(self, name: str) -> Component:
         """The component called ``name``."""

@@ -85,20 +85,21 @@ class Table41Row:
 
 
 def _slips(plant: PlantParams, omega0_hz: int, step: float, t_step: float, mode: str,
-           zeta: float, omega_n: float, comm_step: float, fmu_dir: Any) -> bool:
+           zeta: float, omega_n: float, comm_step: float | None, tol: float | None,
+           fmu_dir: Any) -> bool:
     from .experiments import StaircaseExperiment, run_staircase
 
     w0 = -omega0_hz * HZ  # the report's ABU turns clockwise; the step speeds it up
     exp = StaircaseExperiment(plant, w0, w0 - step, t0=t_step, te=1.0, rounding="lead",
                               theta_ref_mode=mode, zeta=zeta, omega_n=omega_n,
-                              t_end=t_step + CHECK_HORIZON, comm_step=comm_step)
+                              t_end=t_step + CHECK_HORIZON, comm_step=comm_step, tol=tol)
     return run_staircase(exp, fmu_dir).summary["t_slip"] is not None
 
 
 def table41(mus: Sequence[float], theta_ref_mode: str = "integral", t_step: float = 0.0,
             step_hz: float = 1.0, plant: PlantParams | None = None, zeta: float = 0.5,
-            omega_n: float = 2.2, check: bool = True, comm_step: float = 1e-3,
-            fmu_dir: Any = None) -> list[Table41Row]:
+            omega_n: float = 2.2, check: bool = True, comm_step: float | None = None,
+            fmu_dir: Any = None, tol: float | None = None) -> list[Table41Row]:
     """Table 4.1 for the friction coefficients ``mus``.
 
     Args:
@@ -107,7 +108,8 @@ def table41(mus: Sequence[float], theta_ref_mode: str = "integral", t_step: floa
         t_step: time of the setpoint step [s] (matters in thesis mode only).
         step_hz: setpoint step [Hz] (> 0).
         plant: the other plant parameters (mu is replaced by each value).
-        check: co-simulate the found |omega0| and the one below it.
+        check: co-simulate the found |omega0| and the one below it (reusing the loaded
+            FMUs, error-controlled steps unless ``comm_step`` is given without ``tol``).
     """
     plant = PlantParams() if plant is None else plant
     if not mus:
@@ -133,7 +135,7 @@ def table41(mus: Sequence[float], theta_ref_mode: str = "integral", t_step: floa
         result = None
         if check:
             result = {f: _slips(with_mu, f, step_hz * HZ, t_step, theta_ref_mode, zeta, omega_n,
-                                comm_step, fmu_dir)
+                                comm_step, tol, fmu_dir)
                       for f in (omega0_hz, omega0_hz - 1) if f >= 1}
         rows.append(Table41Row(mu, omega0_hz, threshold, jump, result))
     return rows

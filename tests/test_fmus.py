@@ -242,9 +242,11 @@ DECLARED = {
                 "mu_req": {"torque"}, "torque_applied": {"torque"}, "theta": set(),
                 "omega": set(), "beta": set(), "beta_dot": set(), "normal_force": set(),
                 "mode": set(), "switch_count": set(), "t_last_switch": set(),
-                "step_switches": set(), "t_first_step_switch": set()},
+                "step_switches": set(), "t_first_step_switch": set(),
+                "jerk": {"torque", "torque_rate"}},
     "SpeedController": {"torque": {"omega_ref", "omega", "theta"},
-                        "torque_rate": {"omega_ref", "omega", "alpha"}, "x_I": set()},
+                        "torque_rate": {"omega_ref", "omega", "alpha"}, "x_I": set(),
+                        "torque_accel": {"alpha", "jerk"}},
     "Staircase": {"omega_ref": set(), "next_event_time": set(), "step_index": set()},
 }
 
@@ -267,7 +269,9 @@ def test_master_reads_true_output_dependencies(fmu_dir, name, capsys):
 
 @pytest.mark.parametrize("name, perturb, scenarios", [
     # the ball stuck, then slipping: friction feeds through in stick, beta_ddot in slip
-    ("AbuBall", {"torque": 3e-4, "torque_rate": 1e-3}, [{}, {"beta_dot0": 1.0}]),
+    # (with a motor lag the jerk depends on the torque too)
+    ("AbuBall", {"torque": 3e-4, "torque_rate": 1e-3},
+     [{}, {"beta_dot0": 1.0}, {"tau_motor": 0.01}]),
     ("SpeedController", {"omega_ref": -110.0, "omega": -100.0, "theta": 2.0, "alpha": 5.0},
      [{"theta_ref_mode": 1}]),  # the thesis mode uses theta
 ])

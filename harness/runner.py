@@ -1,0 +1,168 @@
+"""The stepping loop of :class:`harness.master.CoSimulation`: proposals, time events,
+switch landing and error rejection by rollback, recording of left and right limits.
+
+One step from t:
+
+1. proposal: the next grid point (fixed step) or t + h from the controller, moved to the
+   earliest announced time event if that lies before it (or less than 20 % of h after it,
+   to avoid a sliver step), and to the stop time likewise;
+2. save every FMU's state, ``fmi2DoStep`` all, read the input-independent outputs once;
+3. a switch strictly inside the step: restore and redo the step up to it (several switches
+   of one FMU without their first time: halve);
+4. propagate at the new point (the left limit if a time event was hit) and estimate the
+   coupling error; above the tolerance: restore, re-set the step start's inputs, redo
+   shorter;
+5. record: one row, or at a time event / switch the left and the right limit.
+
+A time event that falls exactly on the stop time is not taken: the run ends at its left
+limit (a row with side -1) and a note says so, so that no right-hand limit of a setpoint
+step is recorded as if the plant had lived through it.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from .recording import CoSimResult, Recorder
+from .stepping import inner_switches, next_events, switch_events, switch_info
+
+if TYPE_CHECKING:
+    from .master import CoSimulation
+
+#: A proposal within this fraction of h before an event or the stop time is moved onto it.
+STRETCH = 0.2
+
+
+class Runner:
+    """One run of a loaded co-simulation."""
+
+    def __init__(self, sim: "CoSimulation"):
+        self.sim = sim
+        self.plan = sim.plan
+        self.control = sim.error_control()
+        self.rec = Recorder(sim.plan.probes)
+        self.stats: dict[str, Any] = {"steps": 0, "rollbacks": 0, "rejected": 0,
+                                      "do_steps": 0, "max_error": 0.0}
+
+    def _propose(self, t: float, n_grid: int, h: float) -> tuple[float, int]:
+        sim = self.sim
+        if self.control is None:  # fixed step: next grid point strictly after t
+            step = sim.fixed_step
+            while sim.start_time + (n_grid + 1) * step <= t + sim.event_tol:
+                n_grid += 1
+            return sim.start_time + (n_grid + 1) * step, n_grid
+        return t + h, n_grid
+
+    def run(self) -> CoSimResult:
+        sim, plan, rec = self.sim, self.plan, self.rec
+        values = sim.initialize()
+        t = sim.start_time
+        rec.record(t, 0, values)
+        before = switch_info(plan.switches, values)
+        snap = self.control.snapshot(values) if self.control else None
+        h = sim.first_step()
+        n_grid = 0
+        bar = None
+        if sim.progress:
+            from tqdm import tqdm
+            bar = tqdm(total=sim.stop_time - sim.start_time, unit="s", leave=False)
+        try:
+            while sim.stop_time - t > sim.event_tol:
+                target, n_grid = self._propose(t, n_grid, h)
+                slack = 0.0 if self.control is None else STRETCH * (target - t)
+                t_event, owners = next_events(plan.events, values, t, sim.event_tol)
+                hit_event = t_event <= target + max(slack, sim.event_tol)
+                if hit_event:
+                    target = t_event
+                if sim.stop_time - target <= max(slack, sim.event_tol):
+                    target = sim.stop_time
+                event_at_stop = hit_event and abs(target - sim.stop_time) <= sim.event_tol
+                t_new, values, before, snap, h = self._step(
+                    t, target, hit_event, owners, before, snap, event_at_stop, h)
+                if bar is not None:
+                    bar.update(t_new - t)
+                t = t_new
+        finally:
+            if bar is not None:
+                bar.close()
+        self.stats["fmi_calls"] = sim._calls
+        return rec.result(self.stats)
+
+    def _step(self, t: float, target: float, hit_event: bool, owners: frozenset[str],
+              before: list, snap: Any, event_at_stop: bool, h_prop: float):
+        """One accepted step from t; returns (t_new, right-limit values, switch info,
+        hold snapshot, next proposal h)."""
+        sim, plan, rec, stats, control = self.sim, self.plan, self.rec, self.stats, self.control
+        h = target - t
+        states = sim.save_states() if (plan.switches or control) else None
+        tries = 0
+        rejected = False
+        try:
+            while True:
+                sim.do_step(t, h)
+                stats["do_steps"] += 1
+                pre = sim._pre_read()
+                after = switch_info(plan.switches, pre)
+                inner, crowded = inner_switches(t, h, before, after, sim.switch_tol)
+                if (inner or crowded) and tries < sim.max_rollbacks:
+                    sim.restore_states(states, inputs=False)
+                    stats["rollbacks"] += 1
+                    tries += 1
+                    # Land on the first inner switch; halve when an FMU cannot say where.
+                    h = min([ts - t for ts in inner] + ([h / 2.0] if crowded else []))
+                    continue
+                if inner or crowded:
+                    rec.notes.append(f"step from t = {t:.12g} s: switches not separated after "
+                                     f"{tries} rollbacks; accepted the step to {t + h:.12g} s")
+                t_new = t + h
+                at_event = hit_event and abs(t_new - target) <= sim.event_tol
+                held = owners if at_event else frozenset()
+                left = sim._sweep(t_new, pre, held, commit=False)
+                err = control.error(snap, left, h) if control else 0.0
+                if err > 1.0 and h > control.h_min and tries < sim.max_rollbacks:
+                    sim.restore_states(states, inputs=True)
+                    stats["rollbacks"] += 1
+                    stats["rejected"] += 1
+                    tries += 1
+                    rejected = True
+                    h = control.retry_step(h, err)
+                    continue
+                break
+        finally:
+            if states is not None:
+                sim.free_states(states)
+        stats["steps"] += 1
+        stats["max_error"] = max(stats["max_error"], err)
+        new_switches = switch_events(plan.switches, before, after, t, t_new, sim.switch_tol,
+                                     rec.notes)
+        rec.switches.extend(new_switches)
+        at_switch = any(s.located and abs(s.time - t_new) <= sim.switch_tol
+                        for s in new_switches)
+        if at_event and event_at_stop:
+            rec.record(t_new, -1, left)  # held sweep: nothing to commit
+            rec.notes.append(f"the time event at the stop time {t_new:.12g} s is not taken: "
+                             "the run ends at its left limit")
+            values = left
+        elif at_event:
+            rec.time_events.append(t_new)
+            rec.record(t_new, -1, left)
+            values = sim._sweep(t_new, pre)
+            rec.record(t_new, +1, values)
+        elif at_switch:
+            # An FMU reports its state after the switch: both rows are the full sweep.
+            sim.commit()
+            rec.record(t_new, -1, left)
+            rec.record(t_new, +1, left)
+            values = left
+        else:
+            sim.commit()
+            rec.record(t_new, 0, left)
+            values = left
+        h_next = h
+        if control is not None:
+            snap = control.snapshot(values)
+            # A step cut short by an event, a switch or the stop time says little about the
+            # step size: keep the proposal unless the error itself asked for less.
+            cut = not rejected and h < h_prop * (1.0 - 1e-9)
+            h_next = h_prop if cut else control.next_step(h, err)
+        return t_new, values, after, snap, h_next
