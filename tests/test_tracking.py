@@ -243,3 +243,90 @@ def test_parse_seeds():
                      ("inf,1;2,3;4,5", "position 1 'inf,1' is not finite")]:
         with pytest.raises(MarkerError, match=msg):
             parse_seeds(bad)
+
+
+# --------------------------------------------------------------------------------------------
+# the ball under the harsh twin's lighting (measurement.scenario): accuracy of its centre
+
+
+def _lit_recording(seed: int, lighting: str, n: int = 400):
+    """n frames of a harsh-twin scenario (size 200) and the true ball centres [px]."""
+    from measurement.scenario import random_scenario, render_scenario_frames, simulate_scenario
+
+    scn = random_scenario(seed, size=200, lighting=lighting).with_(n_frames=n)
+    st, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, st, pos)
+    seeds = np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])
+    return frames, seeds, pos["ball"]
+
+
+def _ball_error(tracks, true):
+    d = np.stack([tracks.x[:, 2] - true[:, 0], tracks.y[:, 2] - true[:, 1]], axis=1)
+    ok = np.isfinite(d).all(axis=1)
+    rms = float(np.sqrt(np.mean((d[ok] ** 2).sum(axis=1)))) if ok.any() else np.nan
+    bias = float(np.linalg.norm(d[ok].mean(axis=0))) if ok.any() else np.nan
+    return rms, bias, int((~ok).sum())
+
+
+def test_ball_centre_accuracy_under_each_lighting():
+    """Ball centre error [px] against the geometric truth on harsh-twin recordings (8 seeds per
+    lighting, 400 frames each). TL ring: the default tracker. Two spots: the default tracker,
+    the report's mean of the two reflections (``pair``) and our silhouette fit (``outline``)."""
+    from measurement.reflections import track_with_reflections
+
+    seeds_ = range(8)
+    rows = {"ring/default": [], "two_spot/default": [], "two_spot/pair": [],
+            "two_spot/outline": []}
+    for s in seeds_:
+        frames, seeds, true = _lit_recording(s, "ring")
+        rows["ring/default"].append(_ball_error(track_recording(frames, seeds), true))
+        frames, seeds, true = _lit_recording(s, "two_spot")
+        rows["two_spot/default"].append(_ball_error(track_recording(frames, seeds), true))
+        for bm in ("pair", "outline"):
+            tr = track_with_reflections(frames, seeds, ball_method=bm)
+            rows[f"two_spot/{bm}"].append(_ball_error(tr, true))
+    print("\nball centre vs geometric truth, harsh twin, 8 seeds x 400 frames, size 200 "
+          "(RMS / |mean| [px], lost frames), median [min-max] over seeds:")
+    med = {}
+    for name, r in rows.items():
+        a = np.array(r, dtype=float)
+        med[name] = np.nanmedian(a[:, 0])
+        print(f"  {name:18s} RMS {med[name]:.3f} [{np.nanmin(a[:, 0]):.3f}-"
+              f"{np.nanmax(a[:, 0]):.3f}]  bias {np.nanmedian(a[:, 1]):.3f}  "
+              f"lost {int(a[:, 2].sum())}/{len(r) * 400}")
+    out = np.array(rows["two_spot/outline"], dtype=float)
+    pair = np.array(rows["two_spot/pair"], dtype=float)
+    assert med["two_spot/outline"] < 0.7 * med["two_spot/pair"]   # better than the report's way
+    assert np.all(out[:, 0] < 0.5) and out[:, 2].sum() == 0
+    assert np.mean(out[:, 0] < pair[:, 0]) >= 0.75
+
+
+def test_two_reflections_never_silently(tmp_path):
+    """Default tracking refuses a two-reflection recording it cannot fit, naming the option;
+    --ball-reflections 2 tracks it (both ball methods), with the ball within 0.5 px."""
+    from measurement.cli import main
+    from measurement.frames_io import write_npy
+    from measurement.markers import find_markers
+    from measurement.reflections import track_with_reflections
+
+    frames, seeds, true = _lit_recording(12, "two_spot", n=300)
+    found, _ = find_markers(frames[0], ball_reflections=2)
+    assert np.abs(found - seeds).max() < 1.5
+    two = np.array(frames)
+    path = tmp_path / "rec.npy"
+    write_npy(path, two)
+    s = format_seeds(seeds)
+    rc1 = main(["track", str(path), "--out", str(tmp_path / "t1"), "--seeds", s, "--quiet"])
+    rc2 = main(["track", str(path), "--out", str(tmp_path / "t2"), "--seeds", s,
+                "--ball-reflections", "2", "--quiet"])
+    assert rc2 == 0 and (tmp_path / "t2" / "tracks.csv").exists()
+    if rc1 != 0:
+        assert rc1 == 2 and not (tmp_path / "t1" / "tracks.csv").exists()
+    for bm in ("outline", "pair"):
+        tr = track_with_reflections(two, seeds, ball_method=bm)
+        rms, _, lost = _ball_error(tr, true)
+        assert lost == 0 and rms < 0.5, (bm, rms)
+    with pytest.raises(SystemExit) as exc:  # argparse's choices: usage error, status 2
+        main(["track", str(path), "--out", str(tmp_path / "t3"), "--seeds", s,
+              "--ball-reflections", "3", "--quiet"])
+    assert exc.value.code == 2 and not (tmp_path / "t3").exists()
