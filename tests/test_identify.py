@@ -196,3 +196,35 @@ def test_cli_identify_errors_name_the_option_or_file(tmp_path, capsys):
                  "--omega-end-hz", "9"]) == 2
     assert "--pulses-per-rev" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------- the digital twin
+def test_twin_tracks_identify_then_render_with_drive_measures_true_mu(tmp_path, capsys):
+    """identify on the twin's tracks.csv recovers its drive (zeta 0.7, omega_n 12 rad/s, tau
+    20 ms) within 5 %; a recording rendered with --drive drive.json (another noise seed) uses
+    that drive and measures to an interval that contains the true mu."""
+    assert main(["render", "--out", str(tmp_path / "twin"), "--quiet"]) == 0
+    seeds = json.loads((tmp_path / "twin" / "meta.json").read_text())["seeds"]
+    assert main(["track", str(tmp_path / "twin" / "frames.tif"), "--seeds", seeds, "--out",
+                 str(tmp_path / "tracks"), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["identify", "--record", str(tmp_path / "tracks" / "tracks.csv"),
+                 "--omega0-hz", "-9", "--omega-end-hz", "-19", "--te", "0.5", "--out",
+                 str(tmp_path / "id"), "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out)
+    for name, truth in (("zeta", 0.7), ("omega_n_rad_s", 12.0), ("tau_motor_s", 0.02)):
+        assert abs(fit[name] / truth - 1) < 0.05, (name, fit[name])
+    drive = str(tmp_path / "id" / "drive.json")
+    assert main(["render", "--out", str(tmp_path / "run"), "--drive", drive, "--seed", "1",
+                 "--zeta", "0.3", "--mu", "0.03", "--quiet"]) == 0  # --drive wins over --zeta
+    meta = json.loads((tmp_path / "run" / "meta.json").read_text())
+    assert meta["drive"]["zeta"] == fit["zeta"] and meta["drive"]["tau_motor_s"] == fit["tau_motor_s"]
+    assert main(["measure", str(tmp_path / "run" / "frames.tif"), "--seeds", meta["seeds"],
+                 "--out", str(tmp_path / "m"), "--mc-draws", "0", "--no-plots", "--drive", drive,
+                 "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    print(f"\ntwin: identified zeta {fit['zeta']:.6g}, omega_n {fit['omega_n_rad_s']:.6g} rad/s, "
+          f"tau {fit['tau_motor_s']:.6g} s (truth 0.7, 12, 0.02); the --drive recording measured "
+          f"mu in [{s['mu_low']:.5g}, {s['mu_high']:.5g}] (true 0.03)")
+    assert s["mu_low"] <= 0.03 <= s["mu_high"]
+    assert s["drive"]["model"] == "pi-lag"
