@@ -146,6 +146,43 @@ def main() -> None:
               f"{int(tracks.lost.sum())}")
     print("* default method. 'x camera' > 1: faster than the camera records; 'x baseline': "
           "speed relative to the plain cv2.moments tracker (which has no lost-marker tests).")
+    bench_two_reflections(args.repeats)
+
+
+def bench_two_reflections(repeats: int, seed: int = 12) -> None:
+    """The harsh twin's two-spot recording (3072 frames, 256 px): tracking with
+    --ball-reflections 2 (outline, pair) against the default tracker on the same frames,
+    alternated, median of ``repeats`` pairs; accuracy of the ball centre against the truth."""
+    from measurement.reflections import track_with_reflections
+    from measurement.scenario import random_scenario, render_scenario_frames, simulate_scenario
+
+    scn = random_scenario(seed, lighting="two_spot")
+    st, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, st, pos)
+    seeds = np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])
+    true = pos["ball"]
+    print(f"\ntwo reflections on the ball (harsh twin seed {seed}, two_spot lighting, "
+          f"{frames.shape[0]} frames of {frames.shape[2]}x{frames.shape[1]} px, one core):")
+    runs = {"default": lambda: track_recording(frames, seeds),
+            "outline": lambda: track_with_reflections(frames, seeds, ball_method="outline"),
+            "pair": lambda: track_with_reflections(frames, seeds, ball_method="pair")}
+    times: dict[str, list[float]] = {k: [] for k in runs}
+    result = {}
+    for _ in range(repeats):
+        for name, fn in runs.items():  # alternate the methods in every round
+            t = time.perf_counter()
+            result[name] = fn()
+            times[name].append(time.perf_counter() - t)
+    t_def = float(np.median(times["default"]))
+    for name in runs:
+        tr = result[name]
+        t_m = float(np.median(times[name]))
+        d = np.stack([tr.x[:, 2] - true[:, 0], tr.y[:, 2] - true[:, 1]], axis=1)
+        ok = np.isfinite(d).all(axis=1)
+        rms = np.sqrt(np.mean((d[ok] ** 2).sum(axis=1))) if ok.any() else float("nan")
+        print(f"  {name:<8} {t_m:6.3f} s = {frames.shape[0] / t_m:6.0f} frames/s "
+              f"({t_m / t_def:.2f} x the default's time); ball RMS {rms:.3f} px, "
+              f"lost {int((~ok).sum())}")
 
 
 if __name__ == "__main__":
