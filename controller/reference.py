@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 from typing import Iterable
 
 ROUNDINGS = ("lead", "nearest", "trail")
+#: Most setpoint steps a staircase may have (each step time is computed up front).
+MAX_STEPS = 100_000
 
 try:  # the shared error type; a vendored copy inside an FMU falls back to ValueError
     from abu_model.errors import ParameterError
@@ -147,12 +149,17 @@ class Staircase:
             raise ParameterError("rounding", self.rounding, f"one of {', '.join(ROUNDINGS)}")
         span = abs(omega_end - omega0)
         # A tiny tolerance so that 5 Hz / 1 Hz counts as 5 steps despite rounding of 2 pi.
-        n = int(math.floor(span / step + 1e-9))
+        ratio = span / step + 1e-9
+        n = int(math.floor(ratio)) if ratio <= MAX_STEPS + 1 else MAX_STEPS + 1
         if n < 1:
             raise ParameterError(
                 "omega_end", self.omega_end,
                 f"a value at least one step ({step:g} rad/s) away from omega0 = {omega0:g} rad/s "
                 "(the staircase has no step)")
+        if n > MAX_STEPS:
+            raise ParameterError(
+                "step", self.step, f"a setpoint step giving at most {MAX_STEPS} steps from "
+                f"omega0 = {omega0:g} to omega_end = {omega_end:g} rad/s")
         direction = math.copysign(1.0, omega_end - omega0)
         offset = {"lead": 1.0, "nearest": 0.5, "trail": 0.0}[self.rounding]
         times = tuple(t0 + te * _progress_root((k - offset) * step / span) for k in range(1, n + 1))

@@ -316,7 +316,13 @@ static fmi2Status finish(Inst *c, const char *fn, PyObject *result, PyObject **p
     PyObject *code = py.PyTuple_Size(result) == 2 ? py.PyTuple_GetItem(result, 0) : NULL;
     if (code != NULL && payload) *payload = py.PyTuple_GetItem(result, 1);
     long value = code ? py.PyLong_AsLong(code) : -1;
-    if (value == -1) { py.PyErr_Clear(); value = fmi2Fatal; if (payload) *payload = NULL; }
+    if (value == -1) {
+        py.PyErr_Clear();
+        if (payload) *payload = NULL;
+        c->fatal = 1;
+        logf_inst(c, fmi2Fatal, "%s: internal error: malformed answer of the FMU runtime", fn);
+        return fmi2Fatal;
+    }
     if (value & LOG_PENDING) {
         PyObject *logs = py.PyObject_CallMethod(c->obj, "drain_logs", NULL);
         ssize_t n = logs ? py.PyList_Size(logs) : 0;
