@@ -33,8 +33,10 @@ from . import tracking as T
 
 BALL_METHODS = ("outline", "pair")
 DEFAULT_BALL_METHOD = "outline"
-#: Level of the silhouette as a fraction of the body level [-].
+#: Level of the silhouette as a fraction of the body level [-] (first fit).
 LEVEL = 0.33
+#: Refit the silhouette at the steepest point of each ray's profile.
+EDGE_REFINE = True
 #: Reason code for a ball window without two separate reflections.
 NO_PAIR = T.FIT_FAILED
 
@@ -114,6 +116,8 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     level = (LEVEL * body).astype(np.float32)
     kk, xs, ys, above = T._crossings(Hc, level)
     a, b, r, rms, cnt = T._robust_circle(kk, xs, ys, K)
+    if EDGE_REFINE:
+        a, b, r, rms, cnt = _gradient_edge(Hc, a, b, r)
     a += off
     b += off
     reason = np.zeros(K, dtype=np.uint8)
@@ -125,6 +129,48 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     reason[touches] = T.TOUCHES_EDGE
     reason[(body < opts.min_contrast) | (body < opts.min_snr * noise)] = T.LOW_CONTRAST
     return a, b, r, reason
+
+
+def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 72,
+                   span: float = 2.0, step: float = 0.25
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Refit the silhouette at the steepest descent of each ray's profile.
+
+    A fixed level lands inside the edge where the body is dimmer (a lamp shaded by the wall
+    darkens one side); the steepest point of a blurred step does not depend on its height.
+    Rays from the first circle's centre (a, b), radii r - span .. r + span [px], bilinear
+    samples of H, parabolic peak of -dI/drho. Returns a, b, r, rms, count as _robust_circle.
+    """
+    K, h, w = H.shape
+    ang = np.arange(n_rays) * (2 * np.pi / n_rays)
+    rho = np.arange(-span, span + step / 2, step)                       # (P,)
+    ca, sa = np.cos(ang), np.sin(ang)
+    good = np.isfinite(a) & np.isfinite(r)
+    a0, b0, r0 = np.where(good, a, (w - 1) / 2), np.where(good, b, (h - 1) / 2), \
+        np.where(good, r, 1.0)
+    rr = r0[:, None, None] + rho[None, None, :]                          # (K, 1, P)
+    X = a0[:, None, None] + ca[None, :, None] * rr                       # (K, R, P)
+    Y = b0[:, None, None] + sa[None, :, None] * rr
+    X = np.clip(X, 0, w - 1.001)
+    Y = np.clip(Y, 0, h - 1.001)
+    ix, iy = np.floor(X).astype(np.int64), np.floor(Y).astype(np.int64)
+    fx, fy = X - ix, Y - iy
+    kk = np.arange(K)[:, None, None]
+    v = ((1 - fy) * ((1 - fx) * H[kk, iy, ix] + fx * H[kk, iy, ix + 1])
+         + fy * ((1 - fx) * H[kk, iy + 1, ix] + fx * H[kk, iy + 1, ix + 1]))
+    g = v[:, :, :-2] - v[:, :, 2:]                                       # -dI/drho (x 2 step)
+    j = np.clip(g.argmax(axis=2), 1, g.shape[2] - 2)
+    gm, g0, gp = (np.take_along_axis(g, (j + d)[:, :, None], 2)[:, :, 0] for d in (-1, 0, 1))
+    den = gm - 2 * g0 + gp
+    frac = np.where(den < 0, 0.5 * (gm - gp) / np.where(den < 0, den, -1.0), 0.0)
+    edge = r0[:, None] + rho[1:-1][j] + np.clip(frac, -1, 1) * step      # (K, R) radius [px]
+    xs = (a0[:, None] + ca * edge).ravel()
+    ys = (b0[:, None] + sa * edge).ravel()
+    kidx = np.repeat(np.arange(K), n_rays)
+    out = T._robust_circle(kidx, xs, ys, K)
+    for arr in out[:3]:
+        arr[~good] = np.nan
+    return out
 
 
 def _ball_window(radius_px: float) -> int:
