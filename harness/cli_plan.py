@@ -18,7 +18,7 @@ import numpy as np
 
 from abu_model.errors import ParameterError
 
-from .cli_common import add_overwrite, finite, positive
+from .cli_common import add_overwrite, finite, in_range, integer_range, positive
 
 HZ = 2.0 * math.pi
 
@@ -135,9 +135,11 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
     kwargs: dict[str, Any] = {}
     if drive is not None:
         kwargs["drive"] = drive
-    positive("--fps", args.fps, "frames/s")
-    if args.frames < 2:
-        raise ParameterError("--frames", args.frames, "an integer >= 2")
+    in_range("--fps", args.fps, 1.0, 1e6, "frames/s", "a camera's frame rate")
+    integer_range("--frames", args.frames, 2, 100_000, "frames per record; the search "
+                  "evaluates every candidate on the record's time grid")
+    in_range("--speed-max-hz", args.speed_max_hz, 1.0, 1000.0, "Hz",
+             "the search tries every whole-Hz start speed up to it")
     try:
         return DesignSpec(
             lo, hi, ball=BallParams(l=positive("--l", args.l, "m"), d=positive("--d", args.d, "m")),

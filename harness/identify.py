@@ -123,6 +123,16 @@ def fit_drive(record: Record, setpoints: Setpoints, model: str = "pi-lag") -> Id
     n_p = len(names) + (kind == "theta")
     if t.size <= n_p + 2:
         raise ParameterError("--record", record.source, f"more than {n_p + 2} samples")
+    steps = np.asarray(setpoints.step_times)[np.diff(np.asarray(setpoints.levels)) != 0]
+    if steps.size == 0:
+        raise ParameterError("--setpoints", [float(v) for v in setpoints.levels],
+                             "a setpoint sequence with at least one step (a constant setpoint "
+                             "shows nothing of the loop)")
+    if np.count_nonzero(t > steps[0]) < 2 * n_p + 5:
+        raise ParameterError("--record", record.source,
+                             f"a record that covers the response to the setpoint steps (it has "
+                             f"{np.count_nonzero(t > steps[0])} samples after the first step at "
+                             f"{steps[0]:g} s; check the time origin of the setpoints)")
 
     def resid(q: np.ndarray) -> np.ndarray:
         r = _model_values(q[:len(names)], model, setpoints, t, kind) - y
