@@ -233,9 +233,10 @@ def ball_sprites(spec: LightingSpec, l: float, radius_px: float, ball_z: float,
     nx = np.where(inside, xx / radius_px, 0.0)
     ny = np.where(inside, -yy / radius_px, 0.0)               # world Y up
     nz = np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
-    sprites = np.empty((n_phi, n, n), dtype=np.float32)
+    sprites = np.zeros((n_phi, n, n), dtype=np.float32)
+    nxi, nyi, nzi = nx[inside], ny[inside], nz[inside]   # shade only the ball's samples
     for k in range(n_phi):
         phi = 2 * math.pi * k / n_phi
         c = np.array([l * math.cos(phi), l * math.sin(phi), ball_z])
-        sprites[k] = np.where(inside, ball_radiance(spec, c, nx, ny, nz), 0.0)
+        sprites[k][inside] = ball_radiance(spec, c, nxi, nyi, nzi)
     return sprites, inside.astype(np.float32), half
