@@ -155,3 +155,102 @@ def test_cli_renders_a_random_scenario(tmp_path):
     assert main(["render", "--scenario", "random", "--seed", "5", "--size", "150",
                  "--out", str(tmp_path / "bad"), "--quiet"]) == 2
     assert not (tmp_path / "bad").exists()
+
+
+# --------------------------------------------------------------------------- optics and light
+
+
+def test_lens_distortion_and_vignetting_closed_forms():
+    from measurement.optics import OpticsSpec, distort, half_diagonal, vignetting_map
+
+    spec = OpticsSpec(k1=0.02, k2=-0.005, optical_centre=(99.5, 101.0), vignetting=0.3)
+    rc = half_diagonal(200, 200)
+    c = np.array(spec.optical_centre)
+    pts = c + rc * np.array([[1.0, 0.0], [0.0, -0.5], [0.0, 0.0]])
+    d = distort(pts, spec, 200, 200)
+    np.testing.assert_allclose(d[0], c + rc * np.array([1 + 0.02 - 0.005, 0]), atol=1e-12)
+    np.testing.assert_allclose(d[1], c + rc * np.array([0, -0.5 * (1 + 0.02 / 4 - 0.005 / 16)]),
+                               atol=1e-12)
+    np.testing.assert_allclose(d[2], c, atol=1e-12)            # the centre does not move
+    v = vignetting_map(spec, 200, 200)
+    assert v[101, 99] == pytest.approx(1 / (1 + 0.3 * (0.25 / rc ** 2)) ** 2, rel=1e-6)
+    assert v[0, 0] == pytest.approx(1 / (1 + 0.3 * (99.5 ** 2 + 101 ** 2) / rc ** 2) ** 2,
+                                    rel=1e-6)
+
+
+def test_sensor_noise_flicker_and_column_pattern_follow_their_laws():
+    """Flat radiance S: temporal variance = read^2 + S / gain (shot noise); frame means follow
+    the 100 Hz flicker; column means carry the fixed column offsets, the same in every frame."""
+    from measurement.optics import OpticsSpec, Sensor
+
+    spec = OpticsSpec(psf_sigma=0.0, vignetting=0.0, conversion_gain=4.0, read_noise=2.0,
+                      column_offset_sigma=3.0, column_gain_sigma=0.0)
+    S, n = 100.0, 400
+    times = np.arange(n) / 4500.0
+    sens = Sensor(spec, 64, 48, 0.1, 0.7, np.random.default_rng(3))
+    out = sens.apply(np.full((n, 48, 64), S, dtype=np.float32), times).astype(float)
+    gain = 1 + 0.1 * np.cos(2 * np.pi * 100 * times + 0.7)
+    frame_means = out.mean(axis=(1, 2)) - sens.col_off.mean()
+    np.testing.assert_allclose(frame_means, S * gain, atol=0.35)
+    cols = (out / gain[:, None, None]).mean(axis=(0, 1))
+    assert np.corrcoef(cols, sens.col_off)[0, 1] > 0.98
+    flat = out - out.mean(axis=0)                                  # remove the fixed pattern
+    flat -= (S * gain - S)[:, None, None]                          # and the flicker
+    var = flat.var()
+    expected = 2.0 ** 2 + S / 4.0 + 1 / 12.0                      # + quantisation
+    assert var == pytest.approx(expected, rel=0.05)
+    sat = sens.apply(np.full((2, 48, 64), 400.0, dtype=np.float32), times[:2])
+    assert sat.max() == 255 and (sat == 255).mean() > 0.99          # saturation
+
+
+def test_disk_sprite_area_and_centre():
+    from measurement.scene import Sprite, disk_sprite
+
+    spr = Sprite(*disk_sprite(4.3))
+    spr.B = spr.B[None]
+    rng = np.random.default_rng(0)
+    pos = 50 + rng.uniform(-0.5, 0.5, size=(20, 1, 2))
+    vals, x0, y0 = spr.patch(pos, None, 100, 100)
+    area = vals.sum(axis=(1, 2))
+    np.testing.assert_allclose(area, np.pi * 4.3 ** 2, rtol=2e-3)
+    P = vals.shape[-1]
+    cx = (vals.sum(axis=1) * (x0[:, None] + np.arange(P))).sum(1) / area
+    cy = (vals.sum(axis=2) * (y0[:, None] + np.arange(P))).sum(1) / area
+    # bilinear look-ups between 1/8 px offsets: a few thousandths of a px (the tracker's
+    # noise is 0.01 px, the lighting's bias 0.1 px)
+    np.testing.assert_allclose(cx, pos[:, 0, 0], atol=5e-3)
+    np.testing.assert_allclose(cy, pos[:, 0, 1], atol=5e-3)
+
+
+def test_highlight_sits_where_the_normal_bisects_lamp_and_camera():
+    """Glossy highlight of one distant lamp at elevation e, azimuth a (camera far above): the
+    normal bisects them, tilt (90 deg - e) / 2, so the highlight's peak lies R sin(tilt) from
+    the centre toward the lamp (independent closed form)."""
+    from measurement.lighting import Lamp, LightingSpec, ball_sprites
+
+    R = 6.0
+    for elev, az in ((math.radians(30), 0.4), (math.radians(60), 2.5)):
+        far = 1e3
+        lamp = Lamp((far * math.cos(elev) * math.cos(az), far * math.cos(elev) * math.sin(az),
+                     far * math.sin(elev)), far ** 2)
+        spec = LightingSpec("two_spot", (lamp,), 0.0, 1e6, 0.0, 1.0, 4000.0, 0.0, 0.0)
+        spr, inside, half = ball_sprites(spec, 0.0115, R, 1.5e-3, n_phi=1, oversample=16)
+        k = np.unravel_index(np.argmax(spr[0]), spr[0].shape)
+        s = (np.arange(spr.shape[1]) + 0.5) / 16 - half
+        x, y = s[k[1]], -s[k[0]]                      # world y up
+        tilt = (math.pi / 2 - elev) / 2
+        assert math.hypot(x, y) == pytest.approx(R * math.sin(tilt), abs=0.08)
+        assert math.atan2(y, x) == pytest.approx(az, abs=0.03)
+
+
+def test_channel_wall_hides_low_lamps_behind_it():
+    from measurement.lighting import LightingSpec, wall_visibility
+
+    spec = LightingSpec("ring", (), 0.0, 0.2, 0.3, 1.0, 10.0, 0.0, 0.0, wall_height=2.5e-3,
+                        wall_soft=0.3e-3)
+    c = np.array([0.0115, 0.0, 1.5e-3])                          # ball at 3 o'clock
+    assert wall_visibility(spec, c, np.array([0.0, 0.0, 0.2])) == 1.0          # above
+    assert wall_visibility(spec, c, np.array([0.3, 0.0, 0.05])) == 0.0         # low, outside
+    assert wall_visibility(spec, c, np.array([-0.3, 0.0, 0.05])) == 1.0        # across the axis
+    assert wall_visibility(spec.__class__(**{**spec.__dict__, "wall_height": 0.0}), c,
+                           np.array([0.3, 0.0, 0.05])) == 1.0
