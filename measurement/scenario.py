@@ -99,25 +99,31 @@ def _draw_drive(rng: np.random.Generator, mu: float, times: np.ndarray, ball: Ba
     """A drive whose rotor alone puts the first slip inside SLIP_WINDOW_S (redrawn until so)."""
     u = rng.uniform
     lo, hi = SLIP_WINDOW_S
-    for _ in range(400):
+    # the categories are drawn once (only the continuous settings are redrawn), so the slip
+    # placement does not bias the mix of drive kinds and roundings
+    kind = "staircase_pi" if rng.random() < 0.6 else "profile"
+    rounding = str(rng.choice(["lead", "nearest", "trail"]))
+    for attempt in range(1000):
+        if attempt == 500:  # this combination cannot place the slip: draw the categories again
+            kind = "staircase_pi" if kind == "profile" else "profile"
         tau = u(0.0, 0.03)
         # lower speeds for larger mu keep the needed acceleration within a drive's reach
         w0 = -TWO_PI * u(5.0, 14.0) * math.sqrt(0.03 / max(mu, 0.012)) ** 0.5
-        if rng.random() < 0.6:
+        if kind == "staircase_pi":
             spec = DriveSpec(
                 kind="staircase_pi", omega0=w0, tau_motor=tau,
                 omega_end=w0 - TWO_PI * u(6.0, 14.0), t0=u(0.0, 0.05), te=u(0.3, 0.7),
-                rounding=str(rng.choice(["lead", "nearest", "trail"])), zeta=u(0.6, 1.0),
+                rounding=rounding, zeta=u(0.6, 1.0),
                 omega_n=u(8.0, 30.0), setpoint_weight=u(0.5, 1.0),
                 setpoint_tau=0.0 if rng.random() < 0.4 else u(0.002, 0.02))
         else:
             n_b = int(rng.integers(3, 9))
             spacing = u(0.018, 0.045)
-            start = u(0.03, 0.1)
+            start = u(0.06, 0.2)
             amps = [(0.5 + 0.5 * k / (n_b - 1)) * u(0.8, 1.2) for k in range(n_b)]
             bumps = tuple((start + k * spacing, spacing * u(0.4, 0.7), a)
                           for k, a in enumerate(amps))
-            peak_target = mu * u(1.15, 2.0)
+            peak_target = mu * u(1.05, 1.6)
             scale = 0.95 * mu * w0 * w0 / ball.lever_ratio  # a first guess [rad/s^2]
             spec = None
             for _ in range(4):  # fixed-point on the amplitude: peak mu_req -> peak_target
