@@ -42,7 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--comm-step", type=float, default=1e-3,
                    help="fixed communication step of the default experiment [s] (default 0.001)")
     add_overwrite(g)
-    p.set_defaults(func=cmd_export_ssp)
+    # a fixed-step archive: no error-controlled steps (simulate's --tol) to describe
+    p.set_defaults(func=cmd_export_ssp, tol=None)
 
 
 def cmd_export_ssp(args: argparse.Namespace) -> int:
