@@ -181,9 +181,9 @@ _EXTRACTED: dict[tuple[Path, int, int], Path] = {}
 def extracted(path: Path) -> Path:
     """Directory holding the extracted ``path``, extracted once per process and file version.
 
-    The shared libraries are never unloaded (see :meth:`harness.master.CoSimulation.close`), so loading the
-    same extracted library again reuses it instead of mapping one more copy per run. The
-    directory is removed at interpreter exit.
+    The shared libraries are never unloaded (see :meth:`harness.master.CoSimulation.close`),
+    so loading the same extracted library again reuses it instead of mapping one more copy
+    per run. The directory is removed at interpreter exit.
     """
     global _EXTRACT_ROOT
     stat = path.stat()
@@ -197,9 +197,8 @@ def extracted(path: Path) -> Path:
     return _EXTRACTED[key]
 
 
-
 def clean_message(text: str) -> str:
-    """Shorten pythonfmu's 'Fatal py exception encountered: [...] PyObject_CallMethod\\n X("msg")'."""
+    """Shorten pythonfmu's 'Fatal py exception encountered: [...]' to its last line."""
     lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
     if len(lines) > 1 and "py exception" in lines[0].lower():
         return lines[-1]

@@ -30,10 +30,9 @@ from abu_model.errors import ParameterError
 from .fmi import (ERROR, FATAL, GETTERS, SETTERS, AlgebraicLoopError, CoSimulationError,
                   FMUError, Guard, Instance, convert, extracted, make_callbacks)
 from .plan import build_plan, check_names
-from .recording import CoSimResult, Recorder, SwitchEvent
-from .stepping import (DEFAULT_FIRST_STEP, DEFAULT_MAX_STEP, DEFAULT_TOL, ErrorControl,
-                       inner_switches, next_events, switch_events, switch_info)
-from .system import System, split_name
+from .recording import CoSimResult, SwitchEvent
+from .stepping import DEFAULT_FIRST_STEP, DEFAULT_MAX_STEP, DEFAULT_TOL, ErrorControl
+from .system import System
 
 __all__ = ["AlgebraicLoopError", "CoSimResult", "CoSimulation", "CoSimulationError",
            "FMUError", "SwitchEvent", "simulate", "DEFAULT_TOL"]
@@ -61,8 +60,8 @@ class CoSimulation:
         switch_tol: a switch closer than this to a communication point lies on it [s].
         event_tol: a time event closer than this to a proposed point replaces it [s].
         max_rollbacks: rollbacks allowed per step before the nearest point is accepted.
-        progress: show a tqdm progress bar.
-        fmi_call_logger: called with a text line for every FMI call (debugging).
+        progress: show a tqdm progress bar; fmi_call_logger: called with a text line for
+            every FMI call (debugging).
     """
 
     def __init__(self, system: System, start_time: float, stop_time: float,
@@ -210,9 +209,8 @@ class CoSimulation:
                 except Exception:  # an instance in error state may refuse; free it anyway
                     pass
             try:
-                # fmi2FreeInstance without fmpy's dlclose: unloading a pythonfmu (cppfmu)
-                # library leaves the interpreter to crash at garbage collection or exit
-                # (FMPy issue #147, PythonFMU issue #229).
+                # fmi2FreeInstance without fmpy's dlclose: unloading a Python FMU's library
+                # crashes the interpreter later (FMPy issue #147, PythonFMU issue #229).
                 inst.slave.fmi2FreeInstance(inst.slave.component)
             except Exception:
                 pass
@@ -399,8 +397,3 @@ def simulate(system: System, start_time: float, stop_time: float,
     """Load, run and free in one call (see :class:`CoSimulation` for the options)."""
     with CoSimulation(system, start_time, stop_time, comm_step, **options) as sim:
         return sim.run()
-
-
-def component_of(node: str) -> str:
-    """Component name of ``"comp.variable"``."""
-    return split_name(node)[0]

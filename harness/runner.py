@@ -20,7 +20,6 @@ step is recorded as if the plant had lived through it.
 """
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any
 
 from .recording import CoSimResult, Recorder
