@@ -51,12 +51,16 @@ def cmd_export_ssp(args: argparse.Namespace) -> int:
     from fmus.build import build_fmus
     from fmus.ssp import Experiment, write_ssp
 
-    from .cli import staircase_from_args
+    from .cli import build_parser, staircase_from_args
 
     out = Path(args.out)
     if out.suffix.lower() != SSP_SUFFIX:
         raise ParameterError("--out", args.out, "a file name ending in .ssp")
-    exp = staircase_from_args(args)  # every option checked, errors name the option
+    # simulate's options at their defaults under ours: staircase_from_args finds every
+    # attribute it reads, also ones simulate gains later
+    merged = build_parser().parse_args(["simulate"])
+    vars(merged).update(vars(args))
+    exp = staircase_from_args(merged)  # every option checked, errors name the option
     experiment = Experiment(exp.t_start, exp.t_end, exp.comm_step)
     # the target is checked (and locked) first: a refused --out costs no FMU build
     with output_file(out, overwrite=args.overwrite) as target, \
