@@ -195,7 +195,24 @@ def test_cli_identify_errors_name_the_option_or_file(tmp_path, capsys):
     assert main(["identify", "--pulses", str(tmp_path / "rec.csv"), "--omega0-hz", "5",
                  "--omega-end-hz", "9"]) == 2
     assert "--pulses-per-rev" in capsys.readouterr().err
+    _write_csv(tmp_path / "flat.csv", ["time_s", "omega_ref_rad_s"], [[0.0, 0.5], [1.0, 1.0]])
+    assert main(["identify", "--record", str(tmp_path / "rec.csv"), "--setpoints",
+                 str(tmp_path / "flat.csv"), "--out", str(tmp_path / "o")]) == 2
+    assert "--setpoints" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_drive_option_of_simulate_and_render_refuses_what_they_cannot_run(tmp_path, capsys):
+    weighted = Drive("pi-lag-weighted", 0.7, 12.0, 0.02, setpoint_weight=0.6)
+    (tmp_path / "w.json").write_text(dumps_drive(weighted))
+    assert main(["simulate", "--drive", str(tmp_path / "w.json")]) == 2
+    assert "setpoint_weight" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text(json.dumps({"kind": "abu-drive", "version": 1,
+                                                   "model": "pi-lag", "zeta": 0.7}))
+    assert main(["render", "--out", str(tmp_path / "r"), "--drive", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.json" in err and "omega_n_rad_s" in err
+    assert not (tmp_path / "r").exists()
 
 
 # ---------------------------------------------------------------------------- the digital twin
