@@ -109,17 +109,40 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
                                          # noisy to see a kink; 2/3 of the window and 2 sigma
                                          bias_window_ratio=0.5 if opt.sg_polyorder <= 3
                                          else 2.0 / 3.0,
-                                         bias_k=3.0 if opt.sg_polyorder <= 3 else 2.0,
+                                         bias_k=3.0,
                                          trim_s=0.0 if opt.trim_s is None else opt.trim_s)
     return kin_mod.report_kinematics(time, theta, decimation=opt.decimation,
                                      degree=opt.poly_degree,
                                      trim_s=0.05 if opt.trim_s is None else opt.trim_s)
 
 
+def fixed_axis(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coordinates with the centre marker replaced by the fixed ABU axis [px].
+
+    A centre marker glued slightly off the axis circles it once per turn; measured from it, theta
+    carries a harmonic e/r_cd sin(theta + p) whose second derivative, e/r_cd omega^2, is tens of
+    rad/s^2 for e = 0.3 px (the twin's eccentric marker). The axis is the centre of the circle the
+    CD marker runs on (algebraic least-squares circle fit, Kasa 1976) when the record covers
+    more than half a turn; otherwise the mean of the centre marker.
+    """
+    x = np.array(x, dtype=float)
+    y = np.array(y, dtype=float)
+    xc, yc = x[:, 1], y[:, 1]
+    ang = np.unwrap(np.arctan2(-(yc - y[:, 0]), xc - x[:, 0]))
+    if float(np.ptp(ang)) > np.pi:
+        a = np.column_stack([xc, yc, np.ones_like(xc)])
+        sol = np.linalg.lstsq(a, xc ** 2 + yc ** 2, rcond=None)[0]
+        cx, cy = 0.5 * sol[0], 0.5 * sol[1]
+    else:
+        cx, cy = float(np.mean(x[:, 0])), float(np.mean(y[:, 0]))
+    x[:, 0], y[:, 0] = cx, cy
+    return x, y
+
+
 def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
           opt: AnalysisOptions, lost: np.ndarray | None = None, infer: bool = True) -> dict:
     """Angles, kinematics, harmonic removal and interval for filled coordinates."""
-    theta, beta = tracks_io.angles_from_pixels(x, y)
+    theta, beta = tracks_io.angles_from_pixels(*fixed_axis(x, y))
     kin = _kinematics(time, theta, opt)
     trusted = kin.trusted
     med = float(np.median(kin.omega_dot[trusted])) if trusted.any() else 0.0

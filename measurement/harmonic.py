@@ -34,9 +34,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.polynomial import legendre as leg
-from scipy.interpolate import BSpline
-from scipy.linalg import cholesky, solve_triangular
-from scipy.optimize import nnls
 
 from abu_model.errors import ParameterError
 
@@ -93,7 +90,44 @@ def monotone_basis(time: np.ndarray, knot_spacing_s: float) -> np.ndarray:
     return cols[:, keep] / total[keep]
 
 
+def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None) -> tuple[np.ndarray, float]:
+    """min ||a x - b|| subject to x >= 0: Lawson & Hanson's active-set algorithm (1974, ch. 23).
+
+    NumPy only, so that ``abu measure`` does not import ``scipy.optimize`` (~0.3-1 s on the
+    development machine, more than the fit); the same algorithm as ``scipy.optimize.nnls``,
+    checked against it in tests/test_harmonic_nnls.py. Returns (x, residual norm).
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    m, n = a.shape
+    maxiter = 3 * n if maxiter is None else int(maxiter)
+    x = np.zeros(n)
+    passive = np.zeros(n, dtype=bool)
+    w = a.T @ (b - a @ x)
+    tol = 10.0 * np.finfo(float).eps * np.linalg.norm(a, 1) * max(m, n)
+    it = 0
+    while (~passive).any() and np.max(np.where(passive, -np.inf, w)) > tol and it < maxiter:
+        j = int(np.argmax(np.where(passive, -np.inf, w)))
+        passive[j] = True
+        while True:
+            it += 1
+            z = np.zeros(n)
+            z[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+            if np.all(z[passive] > 0) or it >= maxiter:
+                x = z
+                break
+            # step back to the feasible boundary and drop the variables that hit zero
+            neg = passive & (z <= 0)
+            alpha = np.min(x[neg] / (x[neg] - z[neg]))
+            x = x + alpha * (z - x)
+            passive &= x > tol
+            x[~passive] = 0.0
+        w = a.T @ (b - a @ x)
+    return x, float(np.linalg.norm(a @ x - b))
+
+
 def _smooth_basis(time: np.ndarray, knot_spacing_s: float) -> np.ndarray:
+    from scipy.interpolate import BSpline  # only for direction=0 (not the default path)
     t = np.asarray(time, dtype=float)
     k = 3
     n_int = max(1, int(np.ceil((t[-1] - t[0]) / knot_spacing_s)))
@@ -132,8 +166,8 @@ def _partly_nonnegative_lstsq(design: np.ndarray, target: np.ndarray,
     b_proj = target - q @ (q.T @ target)
     # Triangular factor from the Gram matrix (much cheaper than a QR of the tall matrix; the
     # I-spline columns are well enough conditioned for it).
-    r2 = cholesky(a_proj.T @ a_proj, lower=False)
-    rhs = solve_triangular(r2, a_proj.T @ b_proj, trans="T", lower=False)
+    r2 = np.linalg.cholesky(a_proj.T @ a_proj).T           # upper triangular, r2^T r2 = G
+    rhs = np.linalg.solve(r2.T, a_proj.T @ b_proj)
     x_cons, _ = nnls(r2, rhs, maxiter=50 * len(cons))
     x_free, *_ = np.linalg.lstsq(a_free, target - a_cons @ x_cons, rcond=None)
     coef = np.empty(design.shape[1])

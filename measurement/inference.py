@@ -23,9 +23,9 @@ coefficient is estimated from the best fit's residuals; the fit is generalised l
 stated confidence gives the set of mu the beta data allow *given* the measured kinematics.
 
 The kinematics themselves are uncertain: mu enters the model only through q, which scales with
-omega_dot / omega^2, so an error e on q at the slip is an error e on mu. The half-widths are
-combined with z times the relative 1-sigma error of q at the slip (noise of omega, omega_dot) in
-quadrature, and the estimator's truncation-error bound (Richardson, ``kinematics``) is added.
+omega_dot / omega^2, so an error e on q at the slip is an error e on mu. Each profile bound is
+moved outwards by z times the relative 1-sigma error of q at the slip (noise of omega,
+omega_dot) plus the estimator's truncation-error bound (Richardson, ``kinematics``).
 
 Null bounds (``status`` says why): the data allow a ball that never slips within the trusted
 region (upper bound null); they allow a ball already slipping at its start (lower bound null);
@@ -37,7 +37,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import chdtri, ndtri
+from statistics import NormalDist
 
 from abu_model.errors import ParameterError
 
@@ -267,8 +267,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     run_max = np.maximum.accumulate(q)
     q_first, q_top = float(max(q[0], 1e-6)), float(run_max[-1])
     level = float(opt.confidence)
-    crit = float(chdtri(1, 1.0 - level))  # chi^2_1 quantile at the level
-    z = float(ndtri(0.5 + 0.5 * level))
+    z = NormalDist().inv_cdf(0.5 + 0.5 * level)
+    crit = z * z  # chi^2_1 quantile at the level
     full = np.zeros(len(beta))
 
     mcache: dict = {}
@@ -417,9 +417,11 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             rel_bias = float(bias_omega_dot[i0 + onset_idx]) / a
 
     def widen(bound: float, sign: int) -> float:
-        hw = abs(bound - mu_hat)
-        k = math.hypot(hw, z * rel_noise * mu_hat) + rel_bias * mu_hat
-        return mu_hat + sign * k
+        # q (hence every candidate mu) scales with the measured omega_dot / omega^2: a relative
+        # error e of q at the slip moves the whole profile by e. Added linearly to the profile
+        # bound (conservative: the profile and the kinematic error are not independent
+        # Gaussians), z sigma for the noise plus the truncation bound.
+        return bound * (1.0 + sign * (z * rel_noise + rel_bias))
 
     status = "ok"
     mu_low = None if at_start_ok else widen(m_lo_b, -1)

@@ -47,13 +47,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
-from scipy.special import ndtri
+from statistics import NormalDist
 
 from abu_model.errors import ParameterError
 
 from .harmonic import robust_std
-from .kinematics import noise_sigma
+from .kinematics import moving_average, noise_sigma
 
 LOWER_METHODS = ("creep", "band")
 
@@ -259,11 +258,10 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
     window = max(1, int(round(options.smooth_s / dt)))
     b0 = float(np.median(beta_clean[:n_ref]))
     dev = direction * (beta_clean - b0)
-    dev_s = uniform_filter1d(dev, window, mode="nearest")
+    dev_s = moving_average(dev, window)
     sigma_raw = noise_sigma(beta_clean)
     sigma_white = sigma_raw / math.sqrt(window)
-    sigma_coloured = robust_std(uniform_filter1d(np.asarray(beta_residual, float), window,
-                                                 mode="nearest"))
+    sigma_coloured = robust_std(moving_average(np.asarray(beta_residual, float), window))
     sigma_ref = 1.2533 * sigma_raw / math.sqrt(n_ref)  # std of a median of n_ref samples
     sigma_dev = math.sqrt(max(sigma_white, sigma_coloured) ** 2 + sigma_ref ** 2)
     threshold = k * sigma_dev
@@ -333,12 +331,12 @@ def _creep_lower_bound(t, omega, omega_dot, sigma_omega, band_omega_dot, mu_lo, 
     omega_c = np.sign(omega) * (np.abs(omega) + k * sigma_omega)
     omega_dot_c = np.sign(omega_dot) * a_mag
     n_blocks = max(1.0, (i1 - i0 + 1) / window)
-    k_c = max(k, float(-ndtri(options.false_alarm / n_blocks)))  # normal upper quantile
+    k_c = max(k, NormalDist().inv_cdf(1.0 - options.false_alarm / n_blocks))
     limit = k_c * sigma_dev
 
     def rejected(candidates: np.ndarray) -> np.ndarray:
         creep = predicted_creep(t, omega_c, omega_dot_c, candidates, l, d, direction, i0, i1)
-        creep_s = uniform_filter1d(creep, window, axis=1, mode="nearest")
+        creep_s = moving_average(creep, window)
         gap = np.where(creep_s[:, i0: i1 + 1] > 0.0,
                        creep_s[:, i0: i1 + 1] - dev_s[None, i0: i1 + 1], -np.inf)
         return gap.max(axis=1) > limit

@@ -191,5 +191,5 @@ def test_render_then_measure_with_the_command_line(tmp_path, capsys):
     mc = s["monte_carlo"]
     assert mc["draws"] == 4 and mc["mu_high"]["n_defined"] == 4
     assert math.isfinite(s["error_analysis"]["e_mu_max"])
-    for name in ("tracks.csv", "kinematics.csv", "summary.json", "beta.png", "mu.png"):
+    for name in ("tracks.csv", "kinematics.csv", "summary.json", "beta.png", "kinematics.png"):
         assert (out / name).is_file()

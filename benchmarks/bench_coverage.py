@@ -1,0 +1,199 @@
+"""Coverage of the stated confidence interval on mu over the harsh twin's random family.
+
+For each seed: ``measurement.scenario.random_scenario(seed)`` (the family of ``abu render
+--scenario random``: drives, optics, lighting incl. the two-reflection lighting, mu in
+[0.005, 0.06], mu_d/mu in [0.6, 1]) is simulated and rendered to raw frames (``.npy``), then
+``abu measure`` runs on the frames in this process (default settings, ``--no-plots``; two-
+reflection recordings with ``--ball-reflections 2`` as their ``meta.json`` says). Printed:
+
+* coverage of the stated 95 % interval, number of intervals missing mu by more than 2 % of mu,
+  median / 90th percentile relative width, null-bound statuses; the same for the report's
+  running-max interval (``running_max`` in summary.json) for comparison;
+* mu_d: coverage of its interval and median relative error of its estimate;
+* the acceleration bias at the slip: the estimator applied to the *true* theta (no noise) minus
+  the true omega_dot at the first slip frame, against the recording's 1-sigma noise bar of
+  omega_dot (and against noise + truncation bound);
+* seconds per recording (render and measure apart).
+
+Run (one process, nice; the 200-recording run takes about an hour on the shared machine)::
+
+    nice python benchmarks/bench_coverage.py --n 200 --out /tmp/cov
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from harness.cli import main as abu_main  # noqa: E402
+from measurement import kinematics as kin_mod  # noqa: E402
+from measurement.analysis import AnalysisOptions  # noqa: E402
+from measurement.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
+                                  simulate_scenario)
+
+
+def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
+    """Render and measure one recording; the row of the results table."""
+    t0 = time.perf_counter()
+    scn = random_scenario(seed, size=size, lighting=lighting)
+    state, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, state, pos)
+    rec = work / f"rec{seed}.npy"
+    np.save(rec, frames)
+    t1 = time.perf_counter()
+    out = work / f"m{seed}"
+    refl = int(scn.lighting.reflections)
+    args = ["measure", str(rec), "--out", str(out), "--overwrite", "--quiet", "--no-plots",
+            "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+    if refl == 2:
+        args += ["--ball-reflections", "2"]
+    err = io.StringIO()
+    with redirect_stdout(io.StringIO()), redirect_stderr(err):
+        status = abu_main(args)
+    t2 = time.perf_counter()
+    row = {"seed": seed, "reflections": refl, "mu": scn.ball.mu, "mu_d": scn.ball.mu_dynamic,
+           "drive": scn.drive.kind, "tau_motor_s": scn.drive.tau_motor,
+           "render_s": t1 - t0, "measure_s": t2 - t1, "exit": status}
+    rec.unlink()
+    if status != 0:
+        row["error"] = err.getvalue().strip().splitlines()[-1:] or ["?"]
+        return row
+    s = json.loads((out / "summary.json").read_text())
+    row.update({k: s.get(k) for k in ("mu_low", "mu_high", "status", "mu_d_low", "mu_d_high",
+                                      "confidence", "relative_width")})
+    row["mu_d_hat"] = s.get("mu_d")
+    mf = s.get("model_fit") or {}
+    row.update({k: mf.get(k) for k in ("kinematic_rel_sigma_at_slip", "kinematic_rel_bias_at_slip",
+                                       "profile_mu_low", "profile_mu_high", "ar1_rho",
+                                       "t_slip")})
+    row["t_slip_true"] = float(state["switches"][0]) if len(state["switches"]) else None
+    rm = s["running_max"]
+    row.update({"rm_low": rm["mu_low"], "rm_high": rm["mu_high"], "rm_status": rm["status"]})
+    # acceleration bias at the first slip frame: the estimator on the true theta
+    slip = np.flatnonzero(state["mode"] != 0)
+    if slip.size:
+        i = int(slip[0])
+        opt = AnalysisOptions()
+        clean = kin_mod.savgol_kinematics(scn.times, state["theta"], window_s=opt.sg_window_s,
+                                          polyorder=opt.sg_polyorder, sigma_theta=1e-15)
+        with open(out / "kinematics.csv", newline="") as fh:
+            kin = list(csv.DictReader(fh))
+        sig = float(kin[i]["sigma_omega_dot_rad_s2"])
+        bnd = float(kin[i]["bias_omega_dot_rad_s2"] or 0.0)
+        row.update({"slip_frame": i, "acc_bias": float(clean.omega_dot[i] - state["alpha"][i]),
+                    "acc_sigma": sig, "acc_bound": bnd, "acc_true": float(state["alpha"][i])})
+    return row
+
+
+def covered(lo: float | None, hi: float | None, mu: float) -> bool:
+    return (lo is None or lo <= mu) and (hi is None or mu <= hi)
+
+
+def miss(lo: float | None, hi: float | None, mu: float) -> float:
+    """Relative distance of mu outside [lo, hi] (0 inside)."""
+    out = 0.0
+    if lo is not None and mu < lo:
+        out = (lo - mu) / mu
+    if hi is not None and mu > hi:
+        out = (mu - hi) / mu
+    return out
+
+
+def report(rows: list[dict], label: str) -> None:
+    ok = [r for r in rows if r.get("exit") == 0]
+    print(f"\n== {label}: {len(rows)} recordings, {len(ok)} measured "
+          f"({len(rows) - len(ok)} refused or failed)")
+    if not ok:
+        return
+    for name, lo_k, hi_k in (("model-based (summary mu_low/mu_high)", "mu_low", "mu_high"),
+                             ("report's running max (summary running_max)", "rm_low",
+                              "rm_high")):
+        cov = np.mean([covered(r[lo_k], r[hi_k], r["mu"]) for r in ok])
+        misses = [miss(r[lo_k], r[hi_k], r["mu"]) for r in ok]
+        widths = [(r[hi_k] - r[lo_k]) / (0.5 * (r[hi_k] + r[lo_k])) for r in ok
+                  if r[lo_k] is not None and r[hi_k] is not None]
+        both = len(widths)
+        print(f"  {name}: coverage {100 * cov:.1f} % ({len(ok)}), missing mu by > 2 %: "
+              f"{sum(m > 0.02 for m in misses)}, worst miss {100 * max(misses):.1f} %; "
+              f"both bounds in {both}: relative width median "
+              f"{100 * np.median(widths) if widths else float('nan'):.1f} %, 90th percentile "
+              f"{100 * np.percentile(widths, 90) if widths else float('nan'):.1f} %")
+    nulls: dict[str, int] = {}
+    for r in ok:
+        if r["status"] != "ok":
+            nulls[r["status"]] = nulls.get(r["status"], 0) + 1
+    print(f"  statuses other than ok: {nulls or 'none'}")
+    d = [r for r in ok if r["mu_d_low"] is not None]
+    if d:
+        cov_d = np.mean([r["mu_d_low"] <= r["mu_d"] <= r["mu_d_high"] for r in d])
+        err_d = [abs(r["mu_d_hat"] - r["mu_d"]) / r["mu_d"] for r in d
+                 if r["mu_d_hat"] is not None]
+        print(f"  mu_d: interval in {len(d)}, coverage {100 * cov_d:.1f} %, median relative "
+              f"error of the estimate {100 * np.median(err_d):.1f} %")
+    a = [r for r in ok if "acc_bias" in r]
+    if a:
+        z = np.array([abs(r["acc_bias"]) / r["acc_sigma"] for r in a])
+        zt = np.array([abs(r["acc_bias"]) / math.hypot(r["acc_sigma"], r["acc_bound"])
+                       for r in a])
+        rel = np.array([abs(r["acc_bias"] / r["acc_true"]) for r in a if r["acc_true"]])
+        print(f"  acceleration bias at the slip (estimator on the true theta - truth): below "
+              f"its 1-sigma noise bar in {100 * np.mean(z < 1):.1f} % of {len(a)} (below noise + "
+              f"truncation bound: {100 * np.mean(zt < 1):.1f} %); median |bias|/sigma "
+              f"{np.median(z):.2f}, median relative bias {100 * np.median(rel):.2f} %")
+    print(f"  seconds per recording: render {np.mean([r['render_s'] for r in rows]):.1f}, "
+          f"measure (abu measure, in-process, no plots) "
+          f"{np.mean([r['measure_s'] for r in rows]):.2f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=200, help="recordings of the random family")
+    ap.add_argument("--first", type=int, default=0, help="first seed")
+    ap.add_argument("--two-spot", type=int, default=20,
+                    help="extra recordings forced to the two-reflection lighting (seeds after "
+                         "the family's)")
+    ap.add_argument("--size", type=int, default=256, help="frame size [px]")
+    ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
+    args = ap.parse_args()
+    out = Path(args.out or tempfile.mkdtemp(prefix="bench_coverage_"))
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "results.jsonl"
+    jobs = [(s, None) for s in range(args.first, args.first + args.n)]
+    jobs += [(s, "two_spot") for s in range(args.first + args.n,
+                                             args.first + args.n + args.two_spot)]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp, open(log, "a") as fh:
+        for k, (seed, lighting) in enumerate(jobs):
+            row = one(seed, Path(tmp), args.size, lighting)
+            row["forced_lighting"] = lighting
+            rows.append(row)
+            fh.write(json.dumps(row) + "\n")
+            fh.flush()
+            print(f"[{k + 1}/{len(jobs)}] seed {seed} refl {row['reflections']} mu "
+                  f"{row['mu']:.5f} -> [{row.get('mu_low')}, {row.get('mu_high')}] "
+                  f"{row.get('status', row.get('error'))} ({row['render_s']:.1f} + "
+                  f"{row['measure_s']:.1f} s)", flush=True)
+    print(f"\nfamily: measurement.scenario.random_scenario(seed), seeds {args.first}.."
+          f"{args.first + args.n - 1} (+{args.two_spot} forced two-spot), {args.size} px, "
+          f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}")
+    report(rows, "all recordings")
+    report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
+    report([r for r in rows if r["reflections"] == 2], "two reflections (--ball-reflections 2)")
+    print(f"\nper-recording rows: {log}")
+
+
+if __name__ == "__main__":
+    main()
