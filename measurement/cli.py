@@ -79,9 +79,9 @@ def format_table_csv(table: dict[str, np.ndarray]) -> str:
     """CSV text of a table of equal-length columns (names carry the units)."""
     names = list(table)
     cols = [np.asarray(table[n]) for n in names]
-    lines = ["# units are in the column names (_s, _rad, _rad_s, _rad_s2); mu_* and "
-             "running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball",
-             ",".join(names)]
+    # Plain CSV (no comment line): units are in the column names (_s, _rad, _rad_s, _rad_s2);
+    # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball.
+    lines = [",".join(names)]
     for i in range(cols[0].shape[0]):
         cells = []
         for c in cols:
@@ -189,6 +189,7 @@ def cmd_track(args: argparse.Namespace) -> int:
 
 def _analysis_options(args: argparse.Namespace):
     from .analysis import AnalysisOptions
+    from .inference import InferenceOptions
     from .interval import IntervalOptions
     integer_range("--mc-draws", args.mc_draws, 0, MAX_MC_DRAWS,
                   "each draw reruns the analysis, about 50 ms")
@@ -198,7 +199,7 @@ def _analysis_options(args: argparse.Namespace):
         positive("--trim-s", args.trim_s, "s", allow_zero=True)
     if args.sg_window_s is not None:
         in_range("--sg-window-s", args.sg_window_s, 1e-6, 1.0, "s",
-                 "the record lasts well under a second; the default is 0.02 s")
+                 "the record lasts well under a second; the default is 0.036 s")
     if args.k_sigma is not None:
         in_range("--k-sigma", args.k_sigma, 0.1, 100.0, "", "a multiple of the error bar")
     return AnalysisOptions(
@@ -207,7 +208,9 @@ def _analysis_options(args: argparse.Namespace):
         harmonic_phase=args.harmonic_phase,
         interval=IntervalOptions(k_sigma=_positive("--k-sigma", args.k_sigma, ""),
                                  lower=args.lower),
-        mc_draws=args.mc_draws, seed=args.seed)
+        mc_draws=args.mc_draws, seed=args.seed,
+        inference=InferenceOptions(confidence=in_range(
+            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95")))
 
 
 def _check_tracking_options(args: argparse.Namespace) -> None:
@@ -254,7 +257,6 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
     """Track or read the tracks, analyse, write everything into ``out``; returns the summary."""
     from . import tracks_io
     from .analysis import analyse_tracks
-    from .plots import plot_analysis
 
     if args.tracks:
         table_in = tracks_io.read_tracks_csv(args.input)
@@ -290,6 +292,7 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
     atomic_write_text(out / "tracks.csv", tracks_text)
     atomic_write_text(out / "kinematics.csv", table_text)
     if not args.no_plots:
+        from .plots import plot_analysis  # matplotlib only when plotting
         plot_analysis(table, summary, out)
     atomic_write_text(out / "summary.json", summary_text)
     return summary
@@ -458,8 +461,8 @@ def register(subparsers) -> None:
                    help=f"ball diameter [m] (default {DEFAULT_D:g})")
     p.add_argument("--estimator", choices=["savgol", "report"], default="savgol",
                    help="omega / omega_dot estimator (default savgol)")
-    p.add_argument("--sg-window-s", type=float, default=0.02,
-                   help="Savitzky-Golay window [s] (default 0.02)")
+    p.add_argument("--sg-window-s", type=float, default=0.036,
+                   help="Savitzky-Golay window [s] (default 0.036, degree 7)")
     p.add_argument("--poly-degree", type=int, default=10,
                    help="degree of the report estimator's polynomial (default 10)")
     p.add_argument("--trim-s", type=float, default=None,
@@ -472,8 +475,11 @@ def register(subparsers) -> None:
                    help="do not remove the lighting harmonic from beta")
     p.add_argument("--harmonic-phase", choices=["ball", "cd"], default="ball",
                    help="phase of the harmonic: ball angle (default) or theta")
-    p.add_argument("--mc-draws", type=int, default=50,
-                   help="Monte Carlo draws of tracking noise (default 50; 0 = none)")
+    p.add_argument("--mc-draws", type=int, default=0,
+                   help="Monte Carlo draws of tracking noise through the running-max interval "
+                        "(default 0: the model's profile likelihood is the uncertainty)")
+    p.add_argument("--confidence", type=float, default=0.95,
+                   help="level of the confidence sets on mu and mu_d (default 0.95)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
