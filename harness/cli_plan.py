@@ -140,6 +140,8 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
                   "evaluates every candidate on the record's time grid")
     in_range("--speed-max-hz", args.speed_max_hz, 1.0, 1000.0, "Hz",
              "the search tries every whole-Hz start speed up to it")
+    in_range("--step-hz", args.step_hz, 0.01, 10.0, "Hz", "the setpoint resolution; the "
+             "report's setup has 1 Hz")
     try:
         return DesignSpec(
             lo, hi, ball=BallParams(l=positive("--l", args.l, "m"), d=positive("--d", args.d, "m")),
@@ -217,9 +219,9 @@ def cmd_next(args: argparse.Namespace) -> int:
     from controller.drive import drive_from_dict
 
     from .design import check_design
-    from .next_run import combine, propose_next, read_interval
+    from .next_run import combine, propose_next, read_intervals
 
-    intervals = [read_interval(p) for p in args.summaries]
+    intervals = read_intervals(args.summaries)
     drive = None
     if args.drive is None:  # a drive recorded by 'abu measure --drive'
         recorded = next((i["drive"] for i in intervals if i["drive"]), None)
@@ -316,6 +318,7 @@ def register(subparsers) -> None:
         description="Combine the intervals of 'abu measure' (or 'abu simulate') summaries and "
                     "design the next staircase for the combined interval, with the predicted "
                     "combined interval after it.")
-    p.add_argument("summaries", nargs="+", help="summary.json files")
+    p.add_argument("summaries", nargs="+", help="summary.json files of 'abu measure' or 'abu "
+                                                "simulate', or CSV files with mu_low,mu_high")
     _add_design_options(p)
     p.set_defaults(func=cmd_next)

@@ -29,6 +29,31 @@ class IntervalsError(AbuError):
     """The given intervals cannot be combined (unreadable, unbounded or disjoint)."""
 
 
+def read_intervals(paths: Sequence[str | Path]) -> list[dict[str, Any]]:
+    """Every interval of ``paths``: summary.json files (:func:`read_interval`) and CSV files
+    with columns mu_low,mu_high (one interval per row, as ``abu measure-summary`` reads)."""
+    out: list[dict[str, Any]] = []
+    for path in paths:
+        if Path(path).suffix.lower() == ".csv":
+            from measurement.multi import read_intervals as read_csv
+            for row in read_csv([path]):
+                out.append(_checked(row["name"], row["mu_low"], row["mu_high"], None))
+        else:
+            out.append(read_interval(path))
+    return out
+
+
+def _checked(name: str, lo: Any, hi: Any, drive: dict | None) -> dict[str, Any]:
+    for key, value in (("mu_low", lo), ("mu_high", hi)):
+        if not isinstance(value, (int, float)) or isinstance(value, bool) \
+                or not math.isfinite(value) or value < 0:
+            raise IntervalsError(f"{name}: '{key}' is {value!r}; 'abu next' needs both bounds "
+                                 "(a run whose ball slipped inside the record)")
+    if not lo < hi:
+        raise IntervalsError(f"{name}: mu_low = {lo!r} is not below mu_high = {hi!r}")
+    return {"name": name, "mu_low": float(lo), "mu_high": float(hi), "drive": drive}
+
+
 def read_interval(path: str | Path) -> dict[str, Any]:
     """{"name", "mu_low", "mu_high", "drive"} from an ``abu measure`` or ``abu simulate``
     summary.json (``drive``: the drive.json object a measurement recorded, or None)."""
@@ -47,15 +72,8 @@ def read_interval(path: str | Path) -> dict[str, Any]:
         from measurement.multi import read_intervals
         row = read_intervals([p])[0]
         lo, hi = row["mu_low"], row["mu_high"]
-    for key, value in (("mu_low", lo), ("mu_high", hi)):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) \
-                or not math.isfinite(value) or value < 0:
-            raise IntervalsError(f"{p}: '{key}' is {value!r}; 'abu next' needs both bounds "
-                                 "(a run whose ball slipped inside the record)")
-    if not lo < hi:
-        raise IntervalsError(f"{p}: mu_low = {lo!r} is not below mu_high = {hi!r}")
     drive = data.get("drive") if isinstance(data.get("drive"), dict) else None
-    return {"name": str(p), "mu_low": float(lo), "mu_high": float(hi), "drive": drive}
+    return _checked(str(p), lo, hi, drive)
 
 
 def combine(intervals: Sequence[dict[str, Any]]) -> tuple[float, float]:
