@@ -14,7 +14,7 @@ from pathlib import Path
 
 from abu_model.errors import ParameterError
 
-from .cli_common import add_overwrite
+from .cli_common import MAX_COMM_STEPS, add_overwrite, count_limit
 from .output_tx import output_file
 
 SSP_SUFFIX = ".ssp"
@@ -62,6 +62,8 @@ def cmd_export_ssp(args: argparse.Namespace) -> int:
     vars(merged).update(vars(args))
     exp = staircase_from_args(merged)  # every option checked, errors name the option
     experiment = Experiment(exp.t_start, exp.t_end, exp.comm_step)
+    count_limit("--comm-step", exp.comm_step, (exp.t_end - exp.t_start) / exp.comm_step,
+                MAX_COMM_STEPS, "communication steps", "a host would take hours; a typo")
     # the target is checked (and locked) first: a refused --out costs no FMU build
     with output_file(out, overwrite=args.overwrite) as target, \
             tempfile.TemporaryDirectory(prefix="abu_ssp_fmus_") as tmp:

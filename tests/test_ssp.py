@@ -220,7 +220,9 @@ def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys):
     assert main(["export-ssp", "--out", str(tmp_path / "abu.zip")]) == 2
     assert "--out" in capsys.readouterr().err
     assert main(["export-ssp", "--out", str(out), "--omega0-hz", "0"]) == 2
-    assert "--omega0-hz" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
+    assert "--omega0-hz" in capsys.readouterr().err
+    assert main(["export-ssp", "--out", str(out), "--comm-step", "1e-9"]) == 2
+    assert "--comm-step" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
     out.write_bytes(b"earlier")
     assert main(["export-ssp", "--out", str(out)]) == 2  # no --overwrite
     assert "--overwrite" in capsys.readouterr().err and out.read_bytes() == b"earlier"
