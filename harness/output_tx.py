@@ -273,14 +273,36 @@ def _clean_stale_run_dirs(base: Path) -> None:
         lock = _Lock(entry / ".lock")
         try:
             # A run writes its pid into the lock only once it holds it: a written, free lock
-            # means its process is gone (a missing or empty one: a run still starting).
+            # means its process is gone. A missing or empty one: a run still starting, or one
+            # killed before it locked (then the pid in the name is no longer alive).
             if not (lock.path.is_file() and lock.path.stat().st_size > 0):
+                if not _alive(_pid_of(entry.name)):
+                    shutil.rmtree(entry, ignore_errors=True)
                 continue
             if lock.try_acquire(create=False):
                 shutil.rmtree(entry, ignore_errors=True)
                 lock.release()
         except OSError:
             continue
+
+
+def _pid_of(name: str) -> int | None:
+    try:
+        return int(name[len(RUN_PREFIX):].split("-", 1)[0])
+    except ValueError:
+        return None
+
+
+def _alive(pid: int | None) -> bool:
+    if pid is None:
+        return True  # not ours to judge
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def use_run_tempdir() -> Path:

@@ -387,6 +387,9 @@ def _check_render_options(args: argparse.Namespace) -> None:
 def cmd_render(args: argparse.Namespace) -> int:
     """``abu render --out DIR``: render the digital twin of the report's experiment."""
     _check_render_options(args)
+    if getattr(args, "fmu_dir", None):
+        from harness.cli_checks import check_fmu_dir
+        check_fmu_dir("--fmu-dir", args.fmu_dir, ("AbuBall", "SpeedController", "Staircase"))
     out = Path(args.out)
     if getattr(args, "scenario", "report") == "random":
         if getattr(args, "drive", None):
@@ -405,7 +408,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     apply_drive_to_args(args)
     settings = twin_settings_from_args(args)
     with output_folder(out, overwrite=args.overwrite) as tmp:
-        render_twin(tmp, settings)
+        render_twin(tmp, settings, fmu_dir=getattr(args, "fmu_dir", None))
     _log(args, f"wrote the twin recording to {out}")
     return 0
 
@@ -507,6 +510,10 @@ def register(subparsers) -> None:
     add_overwrite(p)
     from .twin import add_render_arguments
     add_render_arguments(p)
+    if "--fmu-dir" not in {s for a in p._actions for s in a.option_strings}:
+        p.add_argument("--fmu-dir", default=None,
+                       help="folder with the FMUs (built there if missing; default: a "
+                            "temporary build)")
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, omega_n "
                    "and tau_motor replace --zeta, --omega-n, --tau-motor")
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")

@@ -165,12 +165,14 @@ def _read_npy(p: Path, *, mmap: bool) -> Recording:
 def _read_tiff(p: Path) -> Recording:
     import tifffile
 
+    n_pages = None  # known once the structure is checked
     try:
         with _tifffile_messages() as messages, tifffile.TiffFile(p) as tif:
             pages = tif.pages
             if len(pages) == 0:
                 raise RecordingError(f"TIFF '{p}' holds no frames")
             _check_tiff_complete(p, tif, messages)
+            n_pages = len(pages)
             series = tif.series
             if len(series) > 1:
                 _raise_differing_pages(p, tif)
@@ -187,8 +189,10 @@ def _read_tiff(p: Path) -> Recording:
         raise
     except Exception as exc:  # tifffile raises many types on corrupt files
         frames = _cv2_read_multi(p)  # e.g. LZW compression without the imagecodecs package
-        if frames is None:
-            raise RecordingError(f"cannot read TIFF '{p}': {exc}") from None
+        if frames is None or n_pages is None or frames.shape[0] != n_pages:
+            # the fallback only decodes what a checked structure describes, page for page
+            raise RecordingError(f"cannot read TIFF '{p}': {' '.join(str(exc).split())}") \
+                from None
     frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
     return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}")
 
@@ -212,6 +216,10 @@ def _tifffile_messages():
     finally:
         logger.removeHandler(handler)
         logger.propagate = old_propagate
+
+
+#: Unreferenced bytes tolerated at the end of a TIFF (tifffile pads 16 bytes).
+TIFF_TAIL_SLACK = 64
 
 
 def _check_tiff_complete(p: Path, tif, messages: list[str]) -> None:
@@ -246,11 +254,42 @@ def _check_tiff_complete(p: Path, tif, messages: list[str]) -> None:
             raise RecordingError(f"TIFF '{p}': its header says {expected} frames, the file holds "
                                  f"{n_pages} pages")
     check_size((n_pages,) + tuple(tif.pages[0].shape[-2:]), f"TIFF '{p}'")
+    ifd_ends = _ifd_ends(p, tif)
+    referenced = max(ifd_ends)
     for i, page in enumerate(tif.pages):
+        if ifd_ends[i] > size:
+            raise RecordingError(f"TIFF '{p}' is truncated: the header of frame {i} ends at byte "
+                                 f"{ifd_ends[i]}, the file has {size} bytes")
         ends = [o + c for o, c in zip(page.dataoffsets, page.databytecounts)]
         if ends and max(ends) > size:
             raise RecordingError(f"TIFF '{p}' is truncated: the data of frame {i} ends at byte "
                                  f"{max(ends)}, the file has {size} bytes")
+        tag_ends = [t.valueoffset + t.valuebytecount for t in page.tags.values()]
+        referenced = max([referenced, *ends, *tag_ends])
+    if size - referenced > TIFF_TAIL_SLACK:
+        # A page chain cut short (a damaged next-page offset) leaves frames nobody refers to.
+        raise RecordingError(f"TIFF '{p}' is damaged: {size - referenced} bytes after the last "
+                             f"of its {n_pages} frames belong to no frame (frames lost from the "
+                             "page chain?)")
+
+
+def _ifd_ends(p: Path, tif) -> list[int]:
+    """Byte just past each page's header (IFD: tag count, tags, next-IFD offset)."""
+    import struct
+
+    t = tif.tiff
+    count_fmt = t.byteorder + ("Q" if t.tagnosize == 8 else "H")
+    ends = []
+    with open(p, "rb") as handle:
+        for page in tif.pages:
+            handle.seek(page.offset)
+            raw = handle.read(t.tagnosize)
+            if len(raw) < t.tagnosize:
+                ends.append(page.offset + t.tagnosize)
+                continue
+            (count,) = struct.unpack(count_fmt, raw)
+            ends.append(page.offset + t.tagnosize + count * t.tagsize + t.offsetsize)
+    return ends
 
 
 def _raise_differing_pages(p: Path, tif) -> None:
@@ -274,7 +313,14 @@ def _cv2_read_multi(p: Path) -> np.ndarray | None:
     """All pages of a TIFF via OpenCV (fallback for codecs tifffile lacks); None on failure."""
     import cv2
 
-    ok, pages = cv2.imreadmulti(str(p), flags=cv2.IMREAD_UNCHANGED)
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # one line on stderr
+    try:
+        ok, pages = cv2.imreadmulti(str(p), flags=cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        ok, pages = False, []
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if not ok or not pages:
         return None
     first = pages[0]

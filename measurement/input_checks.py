@@ -82,13 +82,15 @@ def _angles(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return angles_from_pixels(x, y)
 
 
-def _end_windows(theta: np.ndarray) -> tuple[slice, slice]:
+def _end_windows(theta: np.ndarray) -> tuple[slice, slice] | None:
+    """The first and the last full revolution of theta; None if it turns less than twice."""
     n = theta.size
-    k_min = max(3, n // 10)
     turned = np.abs(theta - theta[0])
-    k1 = int(np.searchsorted(turned, 2 * math.pi)) if turned[-1] >= 4 * math.pi else k_min
-    back = np.abs(theta[-1] - theta[::-1])
-    k2 = int(np.searchsorted(back, 2 * math.pi)) if back[-1] >= 4 * math.pi else k_min
+    if not turned[-1] >= 4 * math.pi:
+        return None
+    k1 = int(np.searchsorted(np.maximum.accumulate(turned), 2 * math.pi))
+    back = np.maximum.accumulate(np.abs(theta[-1] - theta[::-1]))
+    k2 = int(np.searchsorted(back, 2 * math.pi))
     return slice(0, max(k1, 3)), slice(n - max(k2, 3), n)
 
 
@@ -107,9 +109,13 @@ def check_motion_and_roles(time: np.ndarray, x: np.ndarray, y: np.ndarray, sourc
             f"Hz over {duration:.4g} s; at least {MIN_MEAN_SPEED / (2 * math.pi):g} Hz): the "
             "normal force m l omega^2 vanishes and no bound on mu follows; are these markers "
             "on the rotating ABU?")
-    # Mean speed and mean beta over the first and the last full revolution (or tenth of the
-    # record if shorter): whole turns average out the lighting harmonic of beta.
-    first, last = _end_windows(theta)
+    # Mean speed and mean beta over the first and the last full revolution: whole turns average
+    # out the lighting harmonic of beta (over a part of a turn it moved beta by 0.02 rad in the
+    # twin). A record of less than two turns is not checked.
+    windows = _end_windows(theta)
+    if windows is None:
+        return
+    first, last = windows
     w_start = np.polyfit(time[first], theta[first], 1)[0]
     w_end = np.polyfit(time[last], theta[last], 1)[0]
     d_omega = w_end - w_start
