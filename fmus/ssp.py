@@ -153,7 +153,8 @@ def _format_value(value: Scalar, type_: str, where: str) -> str:
             raise ParameterError(where, value, "a finite Real")
         return repr(float(value))
     if type_ == "Integer":
-        if isinstance(value, bool) or int(value) != value:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or int(value) != value:
             raise ParameterError(where, value, "an Integer")
         return str(int(value))
     if type_ == "Boolean":
