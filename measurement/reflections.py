@@ -14,9 +14,10 @@ ball centre (``ball_method``):
   distance): a harmonic disturbance of beta, as in the report.
 * ``outline`` (default, ours): the ball's silhouette. The window is plane-corrected on its
   border (as the default tracker), the reflections are clipped to the body level b (median of
-  the inner disk), and a circle is fitted to the sub-pixel crossings of the level b/3 (the
-  edge of the body against the background) with outlier rejection. The outline does not depend
-  on where the lamps are, only the (faint, symmetric) shading of the body.
+  the inner disk), a circle is fitted to the sub-pixel crossings of the level b/3, then
+  refitted on 72 radial profiles, each crossed half-way between its own inside and outside
+  levels (robust to one side of the body being dimmer), with outlier rejection. The outline
+  does not depend on where the reflections are, only (weakly) on the shading of the body.
 
 :func:`track_with_reflections` tracks the ABU centre and CD markers with the default tracker
 and the ball with one of these, returning ordinary :class:`tracking.Tracks` (3 markers). A
@@ -35,8 +36,10 @@ BALL_METHODS = ("outline", "pair")
 DEFAULT_BALL_METHOD = "outline"
 #: Level of the silhouette as a fraction of the body level [-] (first fit).
 LEVEL = 0.33
-#: Refit the silhouette at the steepest point of each ray's profile.
+#: Refit the silhouette on 72 radial profiles ...
 EDGE_REFINE = True
+#: ... at each ray's half-way level ("local") or at its steepest point ("gradient").
+EDGE_MODE = "local"
 #: Reason code for a ball window without two separate reflections.
 NO_PAIR = T.FIT_FAILED
 
@@ -134,12 +137,14 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
 def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 72,
                    span: float = 2.0, step: float = 0.25
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Refit the silhouette at the steepest descent of each ray's profile.
+    """Refit the silhouette on radial profiles (per-ray half-way level, or steepest point).
 
     A fixed level lands inside the edge where the body is dimmer (a lamp shaded by the wall
-    darkens one side); the steepest point of a blurred step does not depend on its height.
-    Rays from the first circle's centre (a, b), radii r - span .. r + span [px], bilinear
-    samples of H, parabolic peak of -dI/drho. Returns a, b, r, rms, count as _robust_circle.
+    darkens one side). Rays from the first circle's centre (a, b), radii r - span .. r + span
+    [px], bilinear samples of H; each ray is crossed half-way between its own inside and
+    outside levels (``EDGE_MODE = "local"``, used: as little jitter as a fixed level, less bias)
+    or at the parabolic peak of -dI/drho (``"gradient"``: height-independent too, but 3x the
+    jitter). Returns a, b, r, rms, count as _robust_circle.
     """
     K, h, w = H.shape
     ang = np.arange(n_rays) * (2 * np.pi / n_rays)
@@ -158,12 +163,24 @@ def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n
     kk = np.arange(K)[:, None, None]
     v = ((1 - fy) * ((1 - fx) * H[kk, iy, ix] + fx * H[kk, iy, ix + 1])
          + fy * ((1 - fx) * H[kk, iy + 1, ix] + fx * H[kk, iy + 1, ix + 1]))
-    g = v[:, :, :-2] - v[:, :, 2:]                                       # -dI/drho (x 2 step)
-    j = np.clip(g.argmax(axis=2), 1, g.shape[2] - 2)
-    gm, g0, gp = (np.take_along_axis(g, (j + d)[:, :, None], 2)[:, :, 0] for d in (-1, 0, 1))
-    den = gm - 2 * g0 + gp
-    frac = np.where(den < 0, 0.5 * (gm - gp) / np.where(den < 0, den, -1.0), 0.0)
-    edge = r0[:, None] + rho[1:-1][j] + np.clip(frac, -1, 1) * step      # (K, R) radius [px]
+    if EDGE_MODE == "gradient":
+        # -dI/drho over 1 px (4 steps): a shorter difference made the peak twice as noisy
+        g = (v[:, :, :-4] + v[:, :, 1:-3]) - (v[:, :, 3:-1] + v[:, :, 4:])
+        j = np.clip(g.argmax(axis=2), 1, g.shape[2] - 2)
+        gm, g0, gp = (np.take_along_axis(g, (j + d)[:, :, None], 2)[:, :, 0]
+                      for d in (-1, 0, 1))
+        den = gm - 2 * g0 + gp
+        frac = np.where(den < 0, 0.5 * (gm - gp) / np.where(den < 0, den, -1.0), 0.0)
+        edge = r0[:, None] + rho[2:-2][j] + np.clip(frac, -1, 1) * step  # (K, R) radius [px]
+    else:
+        # half-way between this ray's own inside (limb) and outside levels
+        lev = 0.5 * (v[:, :, :3].mean(axis=2) + v[:, :, -3:].mean(axis=2))
+        below = v < lev[:, :, None]
+        j = np.clip(np.argmax(below, axis=2), 1, v.shape[2] - 1)       # first sample below
+        v1 = np.take_along_axis(v, j[:, :, None], 2)[:, :, 0]
+        v0 = np.take_along_axis(v, (j - 1)[:, :, None], 2)[:, :, 0]
+        frac = np.clip((v0 - lev) / np.where(v0 - v1 > 0, v0 - v1, 1.0), 0.0, 1.0)
+        edge = r0[:, None] + rho[j - 1] + frac * step
     xs = (a0[:, None] + ca * edge).ravel()
     ys = (b0[:, None] + sa * edge).ravel()
     kidx = np.repeat(np.arange(K), n_rays)
