@@ -151,7 +151,7 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
             step_hz=positive("--step-hz", args.step_hz, "Hz"),
             edge_s=positive("--edge-s", args.edge_s, "s"),
             slip_window_s=positive("--slip-window-s", args.slip_window_s, "s", allow_zero=True),
-            direction=-1 if args.direction == "cw" else 1, **kwargs)
+            direction=-1 if args.direction == "cw" else 1, objective=args.objective, **kwargs)
     except ParameterError as exc:
         option = {"speed_max_hz": "--speed-max-hz", "edge_s": "--edge-s", "mu_lo": "--mu-range",
                   "mu_hi": "--mu-range"}.get(exc.parameter)
@@ -173,8 +173,9 @@ def _describe_design(design, check) -> str:
         lines.append(f"  {design.mu[k]:>10.4g} {design.t_slip_s[k]:>10.4f} "
                      f"{design.mu_low[k]:>11.4g} {design.mu_high[k]:>11.4g} "
                      f"{100 * design.relative_width[k]:>9.1f}")
-    lines.append(f"  predicted relative width: worst {100 * design.score:.1f} %, median "
-                 f"{100 * float(np.median(design.relative_width)):.1f} % (slip located within "
+    lines.append(f"  predicted relative width: expected {100 * design.expected_width:.1f} %, "
+                 f"worst {100 * design.worst_width:.1f} % (objective {s.objective}; slip located "
+                 "within "
                  f"+-{1e3 * s.slip_window_s:g} ms); the report: "
                  + ", ".join(f"{k} {100 * v:.1f} %"
                              for k, v in design.as_dict()["report_relative_widths"].items()))
@@ -259,6 +260,9 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--slip-window-s", type=float, default=0.004,
                    help="half-width of the time window in which a measurement locates the slip "
                         "[s] (default 0.004, as 'abu measure' on the twin)")
+    g.add_argument("--objective", choices=["expected", "worst"], default="expected",
+                   help="minimise the mean relative width over a log-uniform prior on the range "
+                        "(default) or the largest")
     g.add_argument("--l", type=float, default=1.15e-2, help="radius of the ball centre's path [m]")
     g.add_argument("--d", type=float, default=3.0e-3, help="ball diameter [m]")
     g = p.add_argument_group("output")

@@ -49,6 +49,9 @@ REPORT_INTERVALS = {"eq. 4.9 simulation (mu = 2.75e-3)": (2.63e-3, 4.14e-3),
 CHECK_COMM_STEP = 1e-3
 
 
+OBJECTIVES = ("expected", "worst")
+
+
 class DesignError(ParameterError):
     """No staircase meets the requirements for this range (names the range and why)."""
 
@@ -70,6 +73,8 @@ class DesignSpec:
         direction: -1 (clockwise, the report's) or +1.
         te_grid: candidate durations of the inclined sine [s].
         max_span_steps: largest staircase span in steps.
+        objective: ``expected`` (mean relative width over a log-uniform prior on the range,
+            the default) or ``worst`` (largest relative width over the range).
     """
 
     mu_lo: float
@@ -87,6 +92,7 @@ class DesignSpec:
     direction: int = -1
     te_grid: tuple[float, ...] = tuple(float(x) for x in np.geomspace(0.15, 4.0, 13))
     max_span_steps: int = 30
+    objective: str = "expected"
 
     def __post_init__(self) -> None:
         lo, hi = check_finite("mu_lo", self.mu_lo), check_finite("mu_hi", self.mu_hi)
@@ -104,6 +110,8 @@ class DesignSpec:
         if 2 * self.edge_s >= self.record_s:
             raise ParameterError("edge_s", self.edge_s, f"less than half the record "
                                  f"({self.record_s:g} s)")
+        if self.objective not in OBJECTIVES:
+            raise ParameterError("objective", self.objective, f"one of {', '.join(OBJECTIVES)}")
         if self.slip_window_s < 0 or self.stick_margin < 0 or self.direction not in (-1, 1):
             raise ParameterError("slip_window_s", self.slip_window_s,
                                  "slip_window_s >= 0, stick_margin >= 0, direction -1 or +1")
@@ -129,7 +137,8 @@ class Design:
         step_hz: setpoint resolution [Hz].
         mu, t_slip_s, mu_low, mu_high: predicted slip time [s] and interval at each mu.
         first_step_max_mu_req: largest mu_req before the second step [-].
-        score: worst relative width (mu_high - mu_low) / mu over the range [-].
+        score: the objective's value: mean (``expected``) or largest (``worst``) relative
+            width (mu_high - mu_low) / mu over the log-spaced mu grid [-].
     """
 
     spec: DesignSpec
@@ -153,7 +162,18 @@ class Design:
 
     @property
     def relative_width(self) -> np.ndarray:
+        """(mu_high - mu_low) / mu at each mu of the grid [-]."""
         return (self.mu_high - self.mu_low) / self.mu
+
+    @property
+    def expected_width(self) -> float:
+        """Mean relative width over the log-spaced grid (log-uniform prior) [-]."""
+        return float(np.mean(self.relative_width))
+
+    @property
+    def worst_width(self) -> float:
+        """Largest relative width over the grid [-]."""
+        return float(np.max(self.relative_width))
 
     @property
     def t_end_s(self) -> float:
@@ -191,7 +211,8 @@ class Design:
             "mu_range": [s.mu_lo, s.mu_hi], "record_s": s.record_s, "edge_s": s.edge_s,
             "slip_window_s": s.slip_window_s, "drive": s.drive.to_dict(),
             "first_step_max_mu_req": self.first_step_max_mu_req,
-            "worst_relative_width": self.score,
+            "objective": s.objective, "expected_relative_width": self.expected_width,
+            "worst_relative_width": self.worst_width,
             "median_relative_width": float(np.median(self.relative_width)),
             "table": [{"mu": float(m), "t_slip_s": float(t), "mu_low": float(a),
                        "mu_high": float(b), "relative_width": float((b - a) / m)}
@@ -249,7 +270,8 @@ def _evaluate(spec: DesignSpec, span: int, te: float, rounding: str, w0_hz: np.n
         m_rec = np.maximum.accumulate(np.where(u >= -t0, mu_req[i], 0.0))  # the record's view
         lo = m_rec[np.maximum(idx - 1 - k_delta, 0)]
         hi = m_rec[np.minimum(idx + k_delta, u.size - 1)]
-        score = float(np.max((hi - lo) / mus))
+        rel = (hi - lo) / mus
+        score = float(np.mean(rel) if spec.objective == "expected" else np.max(rel))
         out.append((score, int(w0_hz[i]), t0, ts + t0, lo, hi, float(first[i])))
     return out
 

@@ -50,8 +50,8 @@ def test_design_holds_in_cosimulation_at_20_mu(name, mu_range, drive, fmu_dir):
           f"{design.rounding}; slips at {min(r['t_slip_s'] for r in rows):.3f}-"
           f"{max(r['t_slip_s'] for r in rows):.3f} s of the {spec.record_s:.3f} s record; "
           f"20/20 stuck through the first step, slip inside, bracketed. Predicted measured width "
-          f"(slip located within +-{1e3 * spec.slip_window_s:g} ms): worst "
-          f"{100 * design.score:.1f} %, median {100 * np.median(design.relative_width):.1f} %; "
+          f"(slip located within +-{1e3 * spec.slip_window_s:g} ms): expected (log-uniform "
+          f"prior) {100 * design.expected_width:.1f} %, worst {100 * design.worst_width:.1f} %; "
           f"co-simulation bounds width median {100 * np.median(widths):.2f} %; the report: "
           f"{report}")
 
