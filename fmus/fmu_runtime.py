@@ -39,6 +39,20 @@ _STATUS_NAMES = ("logStatusOK", "logStatusWarning", "logStatusDiscard", "logStat
                  "logStatusFatal")
 
 
+_META: dict[int, tuple[str, str, str, str]] = {}
+
+
+def _meta(variables) -> dict[int, tuple[str, str, str, str]]:
+    """vr -> (type, name, causality, variability): the same for every instance of the class,
+    read once (the enums' attribute access is slow on a per-call path)."""
+    if not _META:
+        for vr, var in variables.items():
+            _META[vr] = (type(var).__name__, var.name,
+                         var.causality.name if var.causality is not None else "local",
+                         var.variability.name if var.variability is not None else "continuous")
+    return _META
+
+
 def instantiate(name: str, resources: str, visible: int, logging_on: int):
     """(OK, Instance) or (ERROR, message)."""
     try:
@@ -81,6 +95,8 @@ class Instance:
             self._drop_slave()
         self.slave = _CLASS(instance_name=self.name, resources=self.resources, visible=self.visible)
         self.vars = self.slave.vars
+        self._getters: dict = {}  # (type, vrs bytes) -> getters of the slave
+        self._setters: dict = {}  # (type, vrs bytes) -> (setter, name, fixed) of the slave
         self.phase = INSTANTIATED
         self.time = 0.0
         self.last_successful_time = 0.0
@@ -90,6 +106,7 @@ class Instance:
         # memory is returned at once, not at the next garbage collection.
         self.slave.__dict__.clear()
         self.slave = None
+        self._getters, self._setters = {}, {}
 
     # ---------------------------------------------------------------- messages
     def message(self, status: int, text: str) -> None:
@@ -227,51 +244,57 @@ class Instance:
 
     # ---------------------------------------------------------------- values
     def _variables(self, fn: str, vrs: bytes, kind: str):
-        """The variables of the value references (all of type ``kind``), or an error message."""
+        """The value references (all of type ``kind``) as a list, or an error message."""
         refs = array(_VR)
         refs.frombytes(vrs)
-        found = []
+        meta = _meta(self.vars)
         for vr in refs:
-            var = self.vars.get(vr)
-            if var is None or type(var).__name__ != kind:
-                known = [v for v, x in self.vars.items() if type(x).__name__ == kind]
-                what = "unknown" if var is None else f"'{var.name}' is a {type(var).__name__}"
+            m = meta.get(vr)
+            if m is None or m[0] != kind:
+                known = [v for v, x in meta.items() if x[0] == kind]
+                what = "unknown" if m is None else f"'{m[1]}' is a {m[0]}"
                 return None, (f"{fn}: value reference {vr} is not a {kind} variable of "
                               f"{SLAVE_CLASS} ({what}; {kind} value references: "
                               f"{known[0] if known else '-'}..{known[-1] if known else '-'})")
-            found.append(var)
-        return found, None
+        return refs, None
 
     def _get(self, fn: str, vrs: bytes, kind: str, code: str, convert):
-        found, problem = self._variables(fn, vrs, kind)
-        if problem:
-            return self._error(problem)
-        return OK, array(code, [convert(var.getter()) for var in found]).tobytes()
-
-    def _settable(self, fn: str, var, value) -> str | None:
-        causality = var.causality.name if var.causality is not None else "local"
-        variability = var.variability.name if var.variability is not None else "continuous"
-        if causality not in ("parameter", "input") or var.setter is None:
-            return f"{fn}: '{var.name}' is a {causality} variable and cannot be set"
-        if variability in ("fixed", "constant") and self.phase not in (INSTANTIATED, INITIALIZATION):
-            return (f"{fn}: '{var.name}' is a fixed parameter and cannot be set in {self.phase} "
-                    "(only before fmi2ExitInitializationMode)")
-        if self.phase == TERMINATED:
-            return f"{fn}: '{var.name}' cannot be set after fmi2Terminate"
-        if isinstance(value, float) and not math.isfinite(value):
-            return f"{fn}: '{var.name}' = {value!r} is not a finite number"
-        return None
-
-    def _set(self, fn: str, vrs: bytes, values: list, kind: str):
-        found, problem = self._variables(fn, vrs, kind)
-        if problem:
-            return self._error(problem)
-        for var, value in zip(found, values):  # check everything before changing anything
-            problem = self._settable(fn, var, value)
+        getters = self._getters.get((kind, vrs))
+        if getters is None:  # checked once per list of value references (a master repeats it)
+            refs, problem = self._variables(fn, vrs, kind)
             if problem:
                 return self._error(problem)
-        for var, value in zip(found, values):
-            var.setter(value)
+            getters = [self.vars[vr].getter for vr in refs]
+            if len(self._getters) < 256:
+                self._getters[(kind, vrs)] = getters
+        return OK, array(code, [convert(g()) for g in getters]).tobytes()
+
+    def _set(self, fn: str, vrs: bytes, values: list, kind: str):
+        plan = self._setters.get((kind, vrs))
+        if plan is None:  # type and causality checked once per list of value references
+            refs, problem = self._variables(fn, vrs, kind)
+            if problem:
+                return self._error(problem)
+            meta, plan = _meta(self.vars), []
+            for vr in refs:
+                _, name, causality, variability = meta[vr]
+                setter = self.vars[vr].setter
+                if causality not in ("parameter", "input") or setter is None:
+                    return self._error(f"{fn}: '{name}' is a {causality} variable and cannot be set")
+                plan.append((setter, name, variability in ("fixed", "constant")))
+            if len(self._setters) < 256:
+                self._setters[(kind, vrs)] = plan
+        phase = self.phase
+        for (_, name, fixed), value in zip(plan, values):  # check all before changing any
+            if phase == TERMINATED:
+                return self._error(f"{fn}: '{name}' cannot be set after fmi2Terminate")
+            if fixed and phase not in (INSTANTIATED, INITIALIZATION):
+                return self._error(f"{fn}: '{name}' is a fixed parameter and cannot be set in "
+                                   f"{phase} (only before fmi2ExitInitializationMode)")
+            if value.__class__ is float and not math.isfinite(value):
+                return self._error(f"{fn}: '{name}' = {value!r} is not a finite number")
+        for (setter, _, _), value in zip(plan, values):
+            setter(value)
         return OK, None
 
     @_calls
@@ -288,10 +311,10 @@ class Instance:
 
     @_calls
     def get_string(self, vrs: bytes):
-        found, problem = self._variables("fmi2GetString", vrs, "String")
+        refs, problem = self._variables("fmi2GetString", vrs, "String")
         if problem:
             return self._error(problem)
-        return OK, [str(var.getter()).encode("utf-8") for var in found]
+        return OK, [str(self.vars[vr].getter()).encode("utf-8") for vr in refs]
 
     @_calls
     def set_real(self, vrs: bytes, values: bytes):
