@@ -7,7 +7,8 @@ plant and filmed with physical nuisances (``abu render --scenario random --seed 
 * the drive (:mod:`measurement.drives`): a staircase PI loop (setpoint weighting, setpoint
   filter, rounding lead / nearest / trail) or a prescribed acceleration of several bumps like
   the report's fig. 5.8, torque lag 0-30 ms; the drive is redrawn until the rotor alone predicts
-  the first slip inside the recording (0.12-0.55 s), so every scenario has a slip to measure;
+  the first slip inside the recording (0.12-0.55 s, and before 80 % of a shorter record), so
+  every scenario has a slip to measure;
 * the light (:mod:`measurement.lighting`): the report's TL ring (75 %) or two-spot indirect
   lighting with two reflections on the ball (25 %), stray side lamps (60 %), 100 Hz flicker;
 * the lens and sensor (:mod:`measurement.optics`): radial distortion, PSF, vignetting,
@@ -99,6 +100,7 @@ def _draw_drive(rng: np.random.Generator, mu: float, times: np.ndarray, ball: Ba
     """A drive whose rotor alone puts the first slip inside SLIP_WINDOW_S (redrawn until so)."""
     u = rng.uniform
     lo, hi = SLIP_WINDOW_S
+    hi = min(hi, 0.8 * float(times[-1]))  # short records: the slip stays clear of the end
     # the categories are drawn once (only the continuous settings are redrawn), so the slip
     # placement does not bias the mix of drive kinds and roundings
     kind = "staircase_pi" if rng.random() < 0.6 else "profile"
