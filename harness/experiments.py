@@ -10,12 +10,9 @@ Everything is SI (rad, rad/s, s, kg, m); the command line converts Hz at its bou
 from __future__ import annotations
 
 import math
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
-
-import numpy as np
 
 from abu_model.errors import ParameterError
 from abu_model.params import PlantParams, check_finite
@@ -24,10 +21,11 @@ from controller.reference import ROUNDINGS, Staircase
 
 from .bounds import (BRACKET_RTOL, SUMMARY_UNITS, UNITS, ExperimentResult,  # noqa: F401
                      _finish_summary, _switches, _table, friction_bounds)
+from .fmu_files import FMU_FILES, ensure_fmus  # noqa: F401
+from .fmu_files import has_input as _has_input
 from .reuse import run_system
 from .system import Component, Connection, Hold, Source, System
 
-FMU_FILES = ("AbuBall", "SpeedController", "Staircase")
 
 #: Time simulated before the first setpoint step so that the steady state and both limits of
 #: the first step are in the table [s].
@@ -39,44 +37,6 @@ _PLANT_PROBES = {
     "friction_force": "plant.friction_force", "mu_req": "plant.mu_req", "mode": "plant.mode",
     "torque_applied": "plant.torque_applied",
 }
-
-# ---------------------------------------------------------------------------- FMUs
-_FMU_CACHE: dict[str, Path] | None = None
-_FMU_CACHE_DIR: tempfile.TemporaryDirectory | None = None
-
-
-def ensure_fmus(fmu_dir: str | Path | Mapping[str, Path] | None = None) -> dict[str, Path]:
-    """Paths of AbuBall.fmu, SpeedController.fmu and Staircase.fmu.
-
-    Args:
-        fmu_dir: a mapping name -> path (as :func:`fmus.build.build_fmus` returns), a folder
-            (missing FMUs are built into it), or None (built once per process into a
-            temporary folder).
-    """
-    global _FMU_CACHE, _FMU_CACHE_DIR
-    if isinstance(fmu_dir, Mapping):
-        paths = {name: Path(fmu_dir[name]) for name in FMU_FILES if name in fmu_dir}
-        missing = [n for n in FMU_FILES if n not in paths or not paths[n].is_file()]
-        if missing:
-            raise ParameterError("fmu_dir", dict(fmu_dir), f"paths of {', '.join(FMU_FILES)}")
-        return paths
-    from fmus.build import build_fmu
-
-    if fmu_dir is None:
-        if _FMU_CACHE is None:
-            _FMU_CACHE_DIR = tempfile.TemporaryDirectory(prefix="abu_fmus_",
-                                                         ignore_cleanup_errors=True)
-            _FMU_CACHE = {name: build_fmu(name, _FMU_CACHE_DIR.name) for name in FMU_FILES}
-        return dict(_FMU_CACHE)
-    folder = Path(fmu_dir)
-    if folder.exists() and not folder.is_dir():
-        raise ParameterError("fmu_dir", str(fmu_dir), "a folder")
-    paths = {}
-    for name in FMU_FILES:
-        path = folder / f"{name}.fmu"
-        paths[name] = path if path.is_file() else Path(build_fmu(name, folder))
-    return paths
-
 
 def _plant_parameters(plant: PlantParams) -> dict[str, Any]:
     ball = plant.ball
@@ -103,21 +63,6 @@ def _effective_tol(exp: Any) -> float | None:
     if exp.tol is not None:
         return exp.tol
     return DEFAULT_TOL if exp.comm_step is None else None
-
-
-_INPUTS_OF: dict[tuple[str, int], frozenset[str]] = {}
-
-
-def _has_input(fmu: Path, name: str) -> bool:
-    """True if the FMU file has an input variable ``name`` (read once per file version)."""
-    import fmpy
-
-    path = Path(fmu)
-    key = (str(path.resolve()), path.stat().st_mtime_ns)
-    if key not in _INPUTS_OF:
-        md = fmpy.read_model_description(str(path), validate=False)
-        _INPUTS_OF[key] = frozenset(v.name for v in md.modelVariables if v.causality == "input")
-    return name in _INPUTS_OF[key]
 
 
 # ---------------------------------------------------------------------------- staircase

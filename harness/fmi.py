@@ -203,3 +203,34 @@ def clean_message(text: str) -> str:
     if len(lines) > 1 and "py exception" in lines[0].lower():
         return lines[-1]
     return " ".join(lines)
+
+
+_CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
+
+
+def raw_accessor(inst: Instance, kind: str, type_: str, vrs: list[int]):
+    """fmi2Get<type> (``kind`` "Get") or fmi2Set<type> ("Set") of fixed value references,
+    straight through ctypes with preallocated arrays: fmpy's ``getReal`` allocates both arrays
+    and its call wrapper inspects the log state on every call (about 10 us per call here).
+    A status above fmi2Warning raises FMICallException, as fmpy does."""
+    name = f"fmi2{kind}{type_}"
+    function = inst.slave._functions[name]
+    n = len(vrs)
+    refs = (ctypes.c_uint * n)(*vrs)
+    buffer = (_CTYPES[type_] * n)()
+    component = inst.slave.component
+
+    if kind == "Get":
+        def get() -> list:
+            status = function(component, refs, n, buffer)
+            if status > 1:
+                raise FMICallException(function=name, status=status)
+            return buffer[:]
+        return get
+
+    def set_(values: list) -> None:
+        buffer[:] = values
+        status = function(component, refs, n, buffer)
+        if status > 1:
+            raise FMICallException(function=name, status=status)
+    return set_

@@ -27,8 +27,9 @@ from fmpy.fmi2 import FMU2Slave
 
 from abu_model.errors import ParameterError
 
-from .fmi import (ERROR, FATAL, GETTERS, SETTERS, AlgebraicLoopError, CoSimulationError,
-                  FMUError, Guard, Instance, convert, extracted, make_callbacks)
+from .fmi import (ERROR, FATAL, AlgebraicLoopError, CoSimulationError, FMUError, Guard,
+                  Instance, convert, extracted, make_callbacks)
+from .fmi_ops import StepOps
 from .plan import build_plan, check_names
 from .recording import CoSimResult, SwitchEvent
 from .stepping import DEFAULT_FIRST_STEP, DEFAULT_MAX_STEP, DEFAULT_TOL, ErrorControl
@@ -38,7 +39,7 @@ __all__ = ["AlgebraicLoopError", "CoSimResult", "CoSimulation", "CoSimulationErr
            "FMUError", "SwitchEvent", "simulate", "DEFAULT_TOL"]
 
 
-class CoSimulation:
+class CoSimulation(StepOps):
     """Loads the components of a :class:`System` and runs the co-simulation.
 
     Use as a context manager (instances are freed on exit, also on errors)::
@@ -85,6 +86,7 @@ class CoSimulation:
         self._last_sets: list[tuple] = []
         self._calls = 0
         self._used = False
+        self._fast: dict[int, tuple] = {}
 
     def set_stepping(self, comm_step: float | None = None, tol: float | None = None,
                      max_step: float = DEFAULT_MAX_STEP) -> None:
@@ -178,6 +180,7 @@ class CoSimulation:
                                         "(components, FMUs, connections, probes, holds)")
             self.system = system
             self.plan = build_plan(system, self._instances)  # new source functions
+            self._fast.clear()
         self._set_times(self.start_time if start_time is None else start_time,
                         self.stop_time if stop_time is None else stop_time)
         self._reset_instances()
@@ -234,15 +237,6 @@ class CoSimulation:
             i.instantiated and i.failed_status < ERROR for i in self._instances.values())
 
     # ------------------------------------------------------------------ data flow
-    def _get(self, inst: Instance, type_: str, vrs: list[int]) -> list:
-        self._calls += 1
-        with Guard(inst, f"fmi2Get{type_}"):
-            return getattr(inst.slave, GETTERS[type_])(vrs)
-
-    def _set(self, inst: Instance, type_: str, vrs: list[int], values: list) -> None:
-        self._calls += 1
-        with Guard(inst, f"fmi2Set{type_}"):
-            getattr(inst.slave, SETTERS[type_])(vrs, values)
 
     def _pre_read(self) -> dict[str, Any]:
         """Input-independent outputs (states, switch and event outputs), once per point."""
@@ -313,7 +307,7 @@ class CoSimulation:
                 vrs.append(var.valueReference)
                 vals.append(convert(value, var.type))
             for type_, (vrs, vals) in by_type.items():
-                self._set(inst, type_, vrs, vals)
+                self._set(inst, type_, vrs, vals, cache=False)
         for inst in self._instances.values():
             with Guard(inst, "fmi2EnterInitializationMode"):
                 inst.slave.enterInitializationMode()
@@ -333,40 +327,6 @@ class CoSimulation:
 
         self._calls = 0
         return Runner(self).run()
-
-    # ------------------------------------------------------------------ states
-    def save_states(self) -> list[tuple[Instance, Any]]:
-        states = []
-        for inst in self._instances.values():
-            self._calls += 1
-            with Guard(inst, "fmi2GetFMUstate"):
-                states.append((inst, inst.slave.getFMUstate()))
-        return states
-
-    def restore_states(self, states: list[tuple[Instance, Any]], inputs: bool) -> None:
-        """Restore every FMU; with ``inputs`` also re-set the inputs of the step start (a
-        sweep at the rejected point changed them; an FMU state need not hold inputs)."""
-        for inst, state in states:
-            self._calls += 1
-            with Guard(inst, "fmi2SetFMUstate"):
-                inst.slave.setFMUstate(state)
-        if inputs:
-            for inst, type_, vrs, values in self._last_sets:
-                self._set(inst, type_, vrs, values)
-
-    def free_states(self, states: list[tuple[Instance, Any]]) -> None:
-        for inst, state in states:
-            self._calls += 1
-            try:
-                inst.slave.freeFMUstate(state)
-            except Exception:
-                pass
-
-    def do_step(self, t: float, h: float) -> None:
-        for inst in self._instances.values():
-            self._calls += 1
-            with Guard(inst, "fmi2DoStep"):
-                inst.slave.doStep(t, h, noSetFMUStatePriorToCurrentPoint=False)
 
     def error_control(self) -> ErrorControl | None:
         """The step-size controller, or None for fixed steps of :attr:`fixed_step`."""

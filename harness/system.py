@@ -163,9 +163,11 @@ class System:
                                          f"a variable of a component in {sorted(known)}")
 
     def structure_key(self) -> tuple:
-        """Everything but parameters and source functions: systems with equal keys can reuse
-        each other's loaded FMU instances (see :mod:`harness.reuse`)."""
-        comps = tuple((c.name, str(c.fmu.resolve())) for c in self.components)
+        """Everything but parameters and source functions (and the FMU files' versions):
+        systems with equal keys can reuse each other's loaded instances (:mod:`harness.reuse`)."""
+        comps = tuple((c.name, str(c.fmu.resolve()),
+                       c.fmu.stat().st_mtime_ns if c.fmu.is_file() else None)
+                      for c in self.components)  # a rebuilt FMU file is another structure
         return (comps, self.connections, tuple(s.dst for s in self.sources),
                 tuple(self.probes.items()), self.holds)
 

@@ -81,6 +81,7 @@ def test_thousand_runs_keep_sys_path_and_memory_flat(fmu_dir):
 
 def test_modules_of_the_master_stay_small():
     harness = Path(__file__).resolve().parents[1] / "harness"
-    for name in ("master", "fmi", "plan", "stepping", "runner", "recording", "reuse", "system"):
+    for name in ("master", "fmi", "fmi_ops", "plan", "stepping", "runner", "recording", "reuse",
+                 "system", "bounds", "experiments", "fmu_files"):
         lines = (harness / f"{name}.py").read_text().count("\n")
         assert lines <= 400, (name, lines)

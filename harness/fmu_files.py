@@ -1,0 +1,62 @@
+"""The toolkit's FMU files for the experiments: built once per process or taken from a
+folder (:func:`ensure_fmus`), and which inputs a file has (:func:`has_input`)."""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Mapping
+
+from abu_model.errors import ParameterError
+
+FMU_FILES = ("AbuBall", "SpeedController", "Staircase")
+
+_FMU_CACHE: dict[str, Path] | None = None
+_FMU_CACHE_DIR: tempfile.TemporaryDirectory | None = None
+
+
+def ensure_fmus(fmu_dir: str | Path | Mapping[str, Path] | None = None) -> dict[str, Path]:
+    """Paths of AbuBall.fmu, SpeedController.fmu and Staircase.fmu.
+
+    Args:
+        fmu_dir: a mapping name -> path (as :func:`fmus.build.build_fmus` returns), a folder
+            (missing FMUs are built into it), or None (built once per process into a
+            temporary folder).
+    """
+    global _FMU_CACHE, _FMU_CACHE_DIR
+    if isinstance(fmu_dir, Mapping):
+        paths = {name: Path(fmu_dir[name]) for name in FMU_FILES if name in fmu_dir}
+        missing = [n for n in FMU_FILES if n not in paths or not paths[n].is_file()]
+        if missing:
+            raise ParameterError("fmu_dir", dict(fmu_dir), f"paths of {', '.join(FMU_FILES)}")
+        return paths
+    from fmus.build import build_fmu
+
+    if fmu_dir is None:
+        if _FMU_CACHE is None:
+            _FMU_CACHE_DIR = tempfile.TemporaryDirectory(prefix="abu_fmus_",
+                                                         ignore_cleanup_errors=True)
+            _FMU_CACHE = {name: build_fmu(name, _FMU_CACHE_DIR.name) for name in FMU_FILES}
+        return dict(_FMU_CACHE)
+    folder = Path(fmu_dir)
+    if folder.exists() and not folder.is_dir():
+        raise ParameterError("fmu_dir", str(fmu_dir), "a folder")
+    paths = {}
+    for name in FMU_FILES:
+        path = folder / f"{name}.fmu"
+        paths[name] = path if path.is_file() else Path(build_fmu(name, folder))
+    return paths
+
+
+_INPUTS_OF: dict[tuple[str, int], frozenset[str]] = {}
+
+
+def has_input(fmu: Path, name: str) -> bool:
+    """True if the FMU file has an input variable ``name`` (read once per file version)."""
+    import fmpy
+
+    path = Path(fmu)
+    key = (str(path.resolve()), path.stat().st_mtime_ns)
+    if key not in _INPUTS_OF:
+        md = fmpy.read_model_description(str(path), validate=False)
+        _INPUTS_OF[key] = frozenset(v.name for v in md.modelVariables if v.causality == "input")
+    return name in _INPUTS_OF[key]
