@@ -1,4 +1,4 @@
-"""FMI 2.0 co-simulation FMUs of the toolkit, built with pythonfmu.
+"""FMI 2.0 co-simulation FMUs of the toolkit (pythonfmu-style slaves, own native layer).
 
 ``fmus.build.build_fmus(out_dir)`` writes AbuBall.fmu (rotor + one ball), SpeedController.fmu
 (PI speed law) and Staircase.fmu (speed setpoint). The slave scripts in this package are

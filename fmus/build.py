@@ -1,18 +1,21 @@
-"""Build the toolkit's FMI 2.0 co-simulation FMUs with pythonfmu.
+"""Build the toolkit's FMI 2.0 co-simulation FMUs (pythonfmu-style slaves, our native layer).
 
 ``build_fmus(out_dir)`` writes ``AbuBall.fmu``, ``SpeedController.fmu`` and ``Staircase.fmu``.
-Each FMU is self-contained apart from the Python interpreter with numpy and scipy:
+Each FMU is self-contained apart from a Python interpreter (standard library only):
 
 * the slave script is renamed to a module name unique across the toolkit
   (``abufmu_abuball`` ...), because every Python FMU loaded in one process shares one
   interpreter and one ``sys.modules``;
-* the project packages it needs (``abu_model``, ``controller``) are copied into the FMU's
-  resources under names unique per FMU (``abuball_abu_model`` ...). Their absolute imports of
+* the project modules it needs (``abu_model``, ``controller``; only those its imports reach,
+  :func:`module_closure`) are copied into the FMU's resources under package names unique per
+  FMU (``abuball_abu_model`` ...), and pythonfmu's runtime part as ``<module>_pythonfmu``. Their absolute imports of
   project packages are rewritten to the vendored names here, and a build fails if a vendored
   file imports a project package that is not vendored with it, so an FMU never picks up
   another installed version of the toolkit;
-* pythonfmu's modelDescription.xml is fixed (units, output dependencies, InitialUnknowns; see
-  :mod:`fmus.model_description`) and the FMU is written atomically.
+* :mod:`fmus.assemble` writes the FMU with the native layer compiled for it (C compiler
+  needed) and the Python runtime; the model description from pythonfmu's ``to_xml`` is fixed
+  (units, output dependencies, InitialUnknowns; see :mod:`fmus.model_description`) and the
+  FMU is written atomically.
 """
 from __future__ import annotations
 
