@@ -15,7 +15,7 @@ ball centre (``ball_method``):
 * ``outline`` (default, ours): the ball's silhouette. The window is plane-corrected on its
   border (as the default tracker), the reflections are clipped to the body level b (median of
   the inner disk), a circle is fitted to the sub-pixel crossings of the level b/3, then
-  refitted on 72 radial profiles, each crossed half-way between its own inside and outside
+  refitted on 36 radial profiles, each crossed half-way between its own inside and outside
   levels (robust to one side of the body being dimmer), with outlier rejection. The outline
   does not depend on where the reflections are, only (weakly) on the shading of the body.
 
@@ -95,8 +95,8 @@ def refine_pair(G: np.ndarray, geo, opts: "T.TrackingOptions"
     return a, b, sep, reason
 
 
-def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float,
+                   edges: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Our way: circle fit to the ball's silhouette with the reflections clipped.
 
     ``radius_px``: the ball's expected image radius [px] (sets the inner disk whose median
@@ -119,7 +119,7 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     level = (LEVEL * body).astype(np.float32)
     kk, xs, ys, above = T._crossings(Hc, level)
     a, b, r, rms, cnt = T._robust_circle(kk, xs, ys, K)
-    if EDGE_REFINE:
+    if EDGE_REFINE and edges:
         a, b, r, rms, cnt = _gradient_edge(Hc, a, b, r)
     a += off
     b += off
@@ -134,8 +134,8 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     return a, b, r, reason
 
 
-def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 72,
-                   span: float = 2.0, step: float = 0.25
+def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 36,
+                   span: float = 2.0, step: float = 0.5
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Refit the silhouette on radial profiles (per-ray half-way level, or steepest point).
 
@@ -219,7 +219,7 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
     # two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
     # second pass re-centres the window on the first estimate
     cx, cy = xs[:, 0], ys[:, 0]
-    for _ in range(2):
+    for final in (False, True):
         for start in range(0, n, T.BATCH_FRAMES):
             stop = min(n, start + T.BATCH_FRAMES)
             x0 = np.rint(cx[start:stop]).astype(np.int64) - half
@@ -231,7 +231,8 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
             if ball_method == "pair":
                 a, b, r, code = refine_pair(G, geo, opts)
             else:
-                a, b, r, code = refine_outline(G, geo, opts, radius_px)
+                # the radial-profile refit only in the final pass (the first one re-centres)
+                a, b, r, code = refine_outline(G, geo, opts, radius_px, edges=final)
             code[~inside] = T.OUTSIDE
             code = np.where(code != T.OK, code, reason0[start:stop, 0])
             X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
