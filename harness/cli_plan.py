@@ -158,6 +158,10 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
         raise exc if option is None else ParameterError(option, exc.value, exc.expected) from None
 
 
+def _g(value: float | None, digits: int = 5) -> str:
+    return "none" if value is None else f"{value:.{digits}g}"
+
+
 def _describe_design(design, check) -> str:
     s = design.spec
     lines = [f"design for mu in [{s.mu_lo:.4g}, {s.mu_hi:.4g}] with the {s.drive.model} drive "
@@ -182,9 +186,9 @@ def _describe_design(design, check) -> str:
     if check is not None:
         ok = all(r["first_step_stuck"] and r["slip_inside"] and r["brackets"] for r in check)
         lines.append("  co-simulation check (FMUs): " + "; ".join(
-            f"mu {r['mu']:.4g}: slip at {r['t_slip_s'] if r['t_slip_s'] is None else round(r['t_slip_s'], 4)} s, "
-            f"[{r['mu_low']:.4g}, {r['mu_high'] if r['mu_high'] is None else round(r['mu_high'], 6)}]"
-            for r in check) + (" - all as designed" if ok else " - NOT as designed"))
+            f"mu {r['mu']:.4g}: slip at {_g(r['t_slip_s'])} s, [{_g(r['mu_low'])}, "
+            f"{_g(r['mu_high'])}]" for r in check)
+            + (" - all as designed" if ok else " - NOT as designed"))
     lines.append("  abu simulate " + " ".join(design.simulate_args()) + " --mu MU")
     lines.append("  abu render " + " ".join(design.render_args()) + " --mu MU")
     return "\n".join(lines)
@@ -247,10 +251,12 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify' (default: the "
                                                  "report's loop, zeta 0.5, omega_n 2.2 rad/s)")
     g = p.add_argument_group("setup and camera")
-    g.add_argument("--speed-min-hz", type=float, default=2.0, help="lowest |speed| [Hz] (default 2)")
+    g.add_argument("--speed-min-hz", type=float, default=2.0,
+                   help="lowest |speed| [Hz] (default 2)")
     g.add_argument("--speed-max-hz", type=float, default=50.0,
                    help="highest |speed| [Hz] (default 50)")
-    g.add_argument("--step-hz", type=float, default=1.0, help="setpoint resolution [Hz] (default 1)")
+    g.add_argument("--step-hz", type=float, default=1.0,
+                   help="setpoint resolution [Hz] (default 1)")
     g.add_argument("--direction", choices=["cw", "ccw"], default="cw",
                    help="turning direction (default cw: negative speeds, the report's)")
     g.add_argument("--fps", type=float, default=4500.0, help="camera frame rate [frames/s]")

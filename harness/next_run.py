@@ -106,7 +106,8 @@ class Proposal:
         lo, hi = self.current
         d = self.design.as_dict()
         return {"kind": "abu-next", "version": 1, "current_interval": [lo, hi],
-                "current_width": hi - lo, "predicted_worst_combined_width": self.worst_combined_width,
+                "current_width": hi - lo,
+                "predicted_worst_combined_width": self.worst_combined_width,
                 "predicted_median_combined_width":
                     float(np.median(self.combined_high - self.combined_low)),
                 "predicted_combined": [{"mu": float(m), "mu_low": float(a), "mu_high": float(b)}

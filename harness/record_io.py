@@ -83,8 +83,9 @@ def _column(path, option, header, rows, numbers, names: tuple[str, ...]) -> np.n
         try:
             out[i] = float(row[j])
         except (IndexError, ValueError):
+            got = repr(row[j]) if j < len(row) else "nothing"
             raise RecordFileError(f"{option} {path}: line {line}, column '{name}': expected a "
-                                  f"number, got {row[j] if j < len(row) else 'nothing'!r}") from None
+                                  f"number, got {got}") from None
         if not math.isfinite(out[i]):
             raise RecordFileError(f"{option} {path}: line {line}, column '{name}': not finite")
     return out

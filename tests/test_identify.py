@@ -102,7 +102,8 @@ def test_identify_recovers_known_drives_with_calibrated_intervals():
             covered.append(lo <= truth[name] <= hi)
         rm = res.report_method
         if rm and rm.get("usable"):
-            report_err.append((abs(rm["zeta"] / drive[0] - 1), abs(rm["omega_n_rad_s"] / drive[1] - 1)))
+            report_err.append((abs(rm["zeta"] / drive[0] - 1),
+                               abs(rm["omega_n_rad_s"] / drive[1] - 1)))
     coverage = float(np.mean(covered))
     rep = np.median(np.array(report_err), axis=0)
     print(f"\nidentify on 60 seeded records (drives {[d for d, _ in DRIVES]}): largest relative "
@@ -224,7 +225,8 @@ def test_drive_option_of_simulate_and_render_refuses_what_they_cannot_run(tmp_pa
     assert "setpoint_weight" in capsys.readouterr().err
     (tmp_path / "bad.json").write_text(json.dumps({"kind": "abu-drive", "version": 1,
                                                    "model": "pi-lag", "zeta": 0.7}))
-    assert main(["render", "--out", str(tmp_path / "r"), "--drive", str(tmp_path / "bad.json")]) == 2
+    assert main(["render", "--out", str(tmp_path / "r"), "--drive",
+                 str(tmp_path / "bad.json")]) == 2
     err = capsys.readouterr().err
     assert "bad.json" in err and "omega_n_rad_s" in err
     assert not (tmp_path / "r").exists()
@@ -250,7 +252,8 @@ def test_twin_tracks_identify_then_render_with_drive_measures_true_mu(tmp_path, 
     assert main(["render", "--out", str(tmp_path / "run"), "--drive", drive, "--seed", "1",
                  "--zeta", "0.3", "--mu", "0.03", "--quiet"]) == 0  # --drive wins over --zeta
     meta = json.loads((tmp_path / "run" / "meta.json").read_text())
-    assert meta["drive"]["zeta"] == fit["zeta"] and meta["drive"]["tau_motor_s"] == fit["tau_motor_s"]
+    assert meta["drive"]["zeta"] == fit["zeta"]
+    assert meta["drive"]["tau_motor_s"] == fit["tau_motor_s"]
     assert main(["measure", str(tmp_path / "run" / "frames.tif"), "--seeds", meta["seeds"],
                  "--out", str(tmp_path / "m"), "--mc-draws", "0", "--no-plots", "--drive", drive,
                  "--json"]) == 0
