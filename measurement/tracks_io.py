@@ -49,6 +49,8 @@ OUTPUT_COLUMNS = tuple(c + UNIT_SUFFIX[c]
 MARKERS = ("center", "cd", "ball")
 #: Minimum number of frames a tracks file must hold for the analysis (its smallest filters).
 MIN_ROWS = 20
+#: Largest tracks file read [bytes] (held in memory; ~100 bytes per row).
+MAX_BYTES = 1 << 30
 
 
 class TracksFileError(AbuError, ValueError):
@@ -103,6 +105,13 @@ def read_tracks_csv(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> Tra
             the file, the 1-based data row, the 1-based line of the file and the column.
     """
     p = Path(path)
+    try:
+        size = p.stat().st_size
+    except OSError:
+        size = 0  # reported below by read_text
+    if size > MAX_BYTES:
+        raise TracksFileError(p, f"{size / 2**20:.0f} MiB; at most {MAX_BYTES / 2**20:.0f} MiB "
+                                 f"(about {MAX_BYTES // 100:,} rows; the report's record has 3072)")
     try:
         text = p.read_text(encoding="utf-8-sig")
     except FileNotFoundError:

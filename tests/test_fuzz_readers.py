@@ -58,7 +58,7 @@ flips = st.lists(st.tuples(st.floats(0, 1, exclude_max=True), st.integers(1, 255
                  min_size=1, max_size=4)
 
 
-@settings(max_examples=60, **SETTINGS)
+@settings(max_examples=150, **SETTINGS)
 @given(name=st.sampled_from(["ours.tif", "s.npy", "cv.tif"]),
        cut=st.floats(0.0, 1.0, exclude_max=True))
 def test_truncated_recording_is_refused(originals, tmp_path, name, cut):
@@ -73,7 +73,7 @@ def test_truncated_recording_is_refused(originals, tmp_path, name, cut):
     np.testing.assert_array_equal(frames, STACK)
 
 
-@settings(max_examples=120, **SETTINGS)
+@settings(max_examples=300, **SETTINGS)
 @given(name=st.sampled_from(["ours.tif", "s.npy", "cv.tif"]), changes=flips)
 def test_bit_flipped_recording_is_refused_or_keeps_its_shape(originals, tmp_path, name, changes):
     data = bytearray(originals[name])
@@ -127,7 +127,7 @@ def mutated_text(draw, text: str) -> str:
     return "".join(lines)
 
 
-@settings(max_examples=150, **SETTINGS)
+@settings(max_examples=300, **SETTINGS)
 @given(text=mutated_text(TRACKS))
 def test_tracks_reader_on_mutated_files(tmp_path, text):
     from measurement.tracks_io import read_tracks_csv
@@ -158,7 +158,7 @@ SUMMARY = json.dumps({"kind": "abu-measure-summary", "format_version": 1, "mu_lo
                       "mu_high": 0.03308, "status": "ok"}, indent=2)
 
 
-@settings(max_examples=120, **SETTINGS)
+@settings(max_examples=300, **SETTINGS)
 @given(text=mutated_text(SUMMARY))
 def test_summary_reader_on_mutated_files(tmp_path, text):
     from measurement.multi import read_intervals

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-RENDER_FRAMES = 300
+RENDER_FRAMES = 200
 
 
 def _env(tmp_base: Path) -> dict[str, str]:
