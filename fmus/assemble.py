@@ -72,8 +72,14 @@ def python_location() -> tuple[str, str]:
 
 def compiler() -> str:
     """The C compiler to use: $CC, else cc or gcc on PATH."""
-    for candidate in (os.environ.get("CC"), "cc", "gcc"):
-        if candidate and shutil.which(candidate.split()[0]):
+    chosen = os.environ.get("CC", "").strip()
+    if chosen:
+        if shutil.which(chosen.split()[0]):
+            return chosen
+        raise FmuBuildError(f"the C compiler in CC = {chosen!r} was not found (unset CC to use "
+                            "cc or gcc from PATH)")
+    for candidate in ("cc", "gcc"):
+        if shutil.which(candidate):
             return candidate
     raise FmuBuildError("no C compiler found (set CC, or install gcc): the FMUs' native layer "
                         f"({NATIVE_SOURCE.name}) is compiled when the FMUs are built")

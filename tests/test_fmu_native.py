@@ -65,3 +65,13 @@ def test_c_host_runs_the_fmu_without_preload_and_survives_mistakes(fmu_dir, tmp_
     for _ in range(RUNS):
         again = subprocess.run(args, capture_output=True, text=True, env=_env(), timeout=120)
         assert again.returncode == 0 and again.stdout.endswith("done\n"), again.stdout + again.stderr
+
+
+def test_build_without_the_c_compiler_is_a_clear_error_and_writes_nothing(tmp_path, monkeypatch):
+    from fmus.build import build_fmu
+    from fmus.model_description import FmuBuildError
+
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    with pytest.raises(FmuBuildError, match="C compiler in CC"):
+        build_fmu("Staircase", tmp_path / "out")
+    assert not list((tmp_path / "out").glob("*"))
