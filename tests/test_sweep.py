@@ -27,11 +27,12 @@ def test_sweep_on_local_cluster_matches_direct_runs(fmu_dir, tmp_path):
     assert not rows[1]["slipped"]  # mu = 6e-3 holds through the whole -17 -> -22 Hz staircase
 
 
-def test_sweep_command_writes_csv_with_units(fmu_dir, tmp_path):
+def test_sweep_command_writes_csv_with_units(fmu_dir, tmp_path, capsys):
     out = tmp_path / "sweep.csv"
     status = main(["sweep", "--mu", "2.75e-3", "--omega0-hz", "-17", "-20", "--out", str(out),
                    "--fmu-dir", str(fmu_dir["AbuBall"].parent), "--workers", "2"])
     assert status == 0
+    assert "(wall time " in capsys.readouterr().out
     rows = list(csv.DictReader(out.open()))
     assert [r["omega0_hz"] for r in rows] == ["-17.0", "-20.0"]
     assert set(rows[0]) >= {"mu", "omega0_hz", "mu_low", "mu_high", "t_slip_s", "bracketed"}
