@@ -239,8 +239,14 @@ def render_scenario_frames(scn: Scenario, state: dict[str, np.ndarray],
         spr.B = spr.B[None]
         disks.append((name, spr))
     o = scn.optics
-    sub = {k: subframe_positions(pos[k], o.exposure_fraction, scn.blur_samples)
-           for k in ("centre", "cd", "ball")}
+    sub = {}
+    for k in ("centre", "cd", "ball"):
+        # sub-frame samples where the marker moves: one per 0.2 px of travel in the exposure
+        # (up to blur_samples; the centre marker barely moves and needs one)
+        travel = o.exposure_fraction * float(np.max(np.hypot(*np.diff(pos[k], axis=0).T),
+                                                    initial=0.0))
+        n_sub = int(np.clip(1 + math.ceil(travel / 0.2), 1, scn.blur_samples))
+        sub[k] = subframe_positions(pos[k], o.exposure_fraction, n_sub)
     phi = np.mod(state["theta"] + state["beta"], TWO_PI)
     kphi = np.rint(phi / TWO_PI * n_phi).astype(np.int64) % n_phi
     sensor = Sensor(o, w, h, scn.lighting.flicker, scn.lighting.flicker_phase, rng)
