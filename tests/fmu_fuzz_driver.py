@@ -129,7 +129,12 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
         import sys
         with open(os.path.join(unzipdir, "resources", "slavemodule.txt")) as f:
             runtime = sys.modules[f.read().strip() + "_rt"]
-        runtime.Instance.get_real = lambda self, vrs: "malformed"
+        def out_of_memory(self, vrs):
+            raise MemoryError
+        out_of_memory.__name__ = "get_real"
+        # a malformed answer, or the runtime's own fmi2Fatal (MemoryError)
+        runtime.Instance.get_real = (runtime._calls(out_of_memory) if rng.random() < 0.5
+                                     else lambda self, vrs: "malformed")
         fmu.getReal([by_type["Real"][0]])
 
     actions = [

@@ -337,9 +337,13 @@ static fmi2Status finish(Inst *c, const char *fn, PyObject *result, PyObject **p
         }
         if (logs) py.Py_DecRef(logs); else py.PyErr_Clear();
     }
+    int logged = (value & LOG_PENDING) != 0;
     value &= 0xff;
     if (value < fmi2OK || value > fmi2Pending) value = fmi2Fatal;
-    if (value == fmi2Fatal) c->fatal = 1;
+    if (value == fmi2Fatal) {
+        c->fatal = 1;
+        if (!logged) logf_inst(c, fmi2Fatal, "%s: fatal error in the FMU runtime", fn);
+    }
     return (fmi2Status)value;
 }
 
