@@ -170,7 +170,10 @@ def _describe_design(design, check) -> str:
              f"  omega0 = {design.omega0_hz} Hz -> omega_end = {design.omega_end_hz:g} Hz, "
              f"t0 = {design.t0_s:g} s, te = {design.te_s:.4g} s, rounding {design.rounding}, "
              f"{s.step_hz:g} Hz steps; camera record [0, {s.record_s:.4f}] s",
-             f"  first step: largest mu_req {design.first_step_max_mu_req:.4g} < mu_lo",
+             f"  first step: largest mu_req {design.first_step_max_mu_req:.4g} < mu_lo"
+             + {None: "", True: "; holds at every corner of the drive's 95 % intervals",
+                False: "; does NOT hold at every corner of the drive's 95 % intervals (identify "
+                       "the drive more precisely)"}[design.ci_corners_hold],
              f"  {'mu [-]':>10} {'t_slip [s]':>10} {'mu_low [-]':>11} {'mu_high [-]':>11} "
              f"{'width [%]':>9}"]
     for k in range(0, design.mu.size, 3):

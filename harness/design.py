@@ -23,6 +23,7 @@ log-spaced grid of mu. Speeds are negative (the report's clockwise ABU) unless `
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -31,7 +32,7 @@ import numpy as np
 
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams, check_finite
-from controller.drive import Drive
+from controller.drive import MODEL_PARAMETERS, Drive
 from controller.reference import ROUNDINGS, Staircase
 
 from .loop_response import as_setpoints, drive_response
@@ -137,6 +138,8 @@ class Design:
         step_hz: setpoint resolution [Hz].
         mu, t_slip_s, mu_low, mu_high: predicted slip time [s] and interval at each mu.
         first_step_max_mu_req: largest mu_req before the second step [-].
+        ci_corners_hold: whether the design also holds (first step stuck, slips inside the
+            record) at every corner of the drive's 95 % intervals (None: no intervals).
         score: the objective's value: mean (``expected``) or largest (``worst``) relative
             width (mu_high - mu_low) / mu over the log-spaced mu grid [-].
     """
@@ -153,6 +156,7 @@ class Design:
     mu_high: np.ndarray
     first_step_max_mu_req: float
     score: float
+    ci_corners_hold: bool | None = None
 
     @property
     def staircase(self) -> Staircase:
@@ -211,6 +215,7 @@ class Design:
             "mu_range": [s.mu_lo, s.mu_hi], "record_s": s.record_s, "edge_s": s.edge_s,
             "slip_window_s": s.slip_window_s, "drive": s.drive.to_dict(),
             "first_step_max_mu_req": self.first_step_max_mu_req,
+            "drive_ci_corners_hold": self.ci_corners_hold,
             "objective": s.objective, "expected_relative_width": self.expected_width,
             "worst_relative_width": self.worst_width,
             "median_relative_width": float(np.median(self.relative_width)),
@@ -277,8 +282,11 @@ def _evaluate(spec: DesignSpec, span: int, te: float, rounding: str, w0_hz: np.n
 
 
 def design_staircase(spec: DesignSpec) -> Design:
-    """The staircase with the smallest worst-case predicted width for ``spec``'s mu range.
+    """The staircase with the smallest predicted width (``spec.objective``) for the range.
 
+    Among the 30 best candidates of the coarse search, the first that holds on the frame grid
+    and, when the drive has 95 % intervals, at every corner of them (:func:`holds`) is taken;
+    if none holds at the corners, the best nominal one (``ci_corners_hold`` False).
     Raises :class:`DesignError` if no staircase within the limits meets the requirements.
     """
     mus = spec.mu_grid()
@@ -302,20 +310,56 @@ def design_staircase(spec: DesignSpec) -> Design:
                           "narrow the range, or change the speed limits or the drive)")
     best.sort(key=lambda c: (c[0], abs(c[1])))
     fine = 1.0 / spec.fps
-    for score, w0_hz, span, te, rounding in best[:10]:  # confirm on the frame grid
+    corners = drive_corners(spec.drive)
+    fallback = None
+    for score, w0_hz, span, te, rounding in best[:30]:  # confirm on the frame grid
         got = _evaluate(spec, span, te, rounding, np.array([float(w0_hz)]), mus, fine)
-        if got:
-            s, w, t0, ts, lo, hi, first = got[0]
-            d = spec.direction
-            end = round(w + span * spec.step_hz, 9)
-            return Design(spec, d * w, d * (int(end) if float(end).is_integer() else end), t0,
-                          te, rounding, mus, ts, lo, hi, first, s)
+        if not got:
+            continue
+        s, w, t0, ts, lo, hi, first = got[0]
+        d = spec.direction
+        end = round(w + span * spec.step_hz, 9)
+        design = Design(spec, d * w, d * (int(end) if float(end).is_integer() else end), t0,
+                        te, rounding, mus, ts, lo, hi, first, s)
+        if not corners:
+            return design
+        # prefer the best design that also holds for every corner of the drive's intervals
+        design.ci_corners_hold = all(holds(replace(spec, drive=c), design.staircase)
+                                     for c in corners)
+        if design.ci_corners_hold:
+            return design
+        fallback = fallback or design
+    if fallback is not None:
+        return fallback
     raise DesignError("--mu-range", [spec.mu_lo, spec.mu_hi],
                       "a range with a design that holds on the frame grid (none did)")
 
 
+def drive_corners(drive: Drive) -> list[Drive]:
+    """The drive at every corner of its 95 % intervals (empty without intervals)."""
+    names = [n for n in MODEL_PARAMETERS[drive.model] if n in drive.ci95]
+    out = []
+    for corner in itertools.product(*(drive.ci95[n] for n in names)):
+        v = {n: drive.value(n) for n in MODEL_PARAMETERS["pi-lag-weighted"]}
+        v.update(zip(names, corner))
+        out.append(Drive(drive.model, v["zeta"], v["omega_n_rad_s"],
+                         v["tau_motor_s"] if drive.model != "second-order" else 0.0,
+                         v["setpoint_weight"] if drive.model == "pi-lag-weighted" else 1.0))
+    return out
+
+
+def holds(spec: DesignSpec, staircase: Staircase) -> bool:
+    """Whether ``staircase`` keeps the ball stuck through the first step at mu_lo and puts the
+    slips of mu_lo and mu_hi inside the record, at least ``edge_s`` from its ends."""
+    p = predict(spec, staircase, np.array([spec.mu_lo, spec.mu_hi]))
+    ts = p["t_slip_s"]
+    return bool(p["first_step_max"] < spec.mu_lo and np.all(np.isfinite(ts))
+                and np.all((ts >= spec.edge_s) & (ts <= spec.record_s - spec.edge_s)))
+
+
 def predict(spec: DesignSpec, staircase: Staircase, mus: np.ndarray) -> dict[str, np.ndarray]:
-    """Predicted slip time [s] and interval at ``mus`` for a given staircase (record at 0)."""
+    """Predicted slip time [s] and interval at ``mus`` for a given staircase (record at 0), and
+    the largest mu_req before the second step (``first_step_max``)."""
     dt = 1.0 / spec.fps
     t = np.arange(min(0.0, staircase.t0) - 0.01, spec.record_s + dt / 2, dt)
     r = drive_response(spec.drive, as_setpoints(staircase), t, need_theta=False)
@@ -327,7 +371,9 @@ def predict(spec: DesignSpec, staircase: Staircase, mus: np.ndarray) -> dict[str
     inside = idx < t.size
     idx_c = np.minimum(idx, t.size - 1)
     nan = np.full(mus.shape, np.nan)
-    return {"mu": mus, "t_slip_s": np.where(inside, t[idx_c], nan),
+    second = staircase.step_times[1] if staircase.n_steps > 1 else math.inf
+    return {"first_step_max": float(np.max(mu_req[t < second])),
+            "mu": mus, "t_slip_s": np.where(inside, t[idx_c], nan),
             "mu_low": np.where(inside, m_rec[np.maximum(idx_c - 1 - k, 0)], nan),
             "mu_high": np.where(inside, m_rec[np.minimum(idx_c + k, t.size - 1)], nan)}
 

@@ -82,3 +82,22 @@ def test_design_refuses_a_range_no_staircase_can_cover(capsys):
     assert "--mu-range" in err and "none found" in err
     assert main(["design", "--mu-range", "0.03", "0.02", "--no-check"]) == 2
     assert "--mu-range" in capsys.readouterr().err
+
+
+def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
+    """A drive known to +-15 %: the design holds (predicted) at all 8 corners of its intervals,
+    and co-simulating two opposite corners at the range's ends confirms it."""
+    from dataclasses import replace
+
+    from harness.design import drive_corners, holds
+
+    ci = {"zeta": (0.6, 0.8), "omega_n_rad_s": (10.0, 14.0), "tau_motor_s": (0.017, 0.023)}
+    drive = Drive("pi-lag", 0.7, 12.0, 0.02, ci95=ci)
+    spec = DesignSpec(0.02, 0.04, drive=drive)
+    design = design_staircase(spec)
+    corners = drive_corners(drive)
+    assert len(corners) == 8 and design.ci_corners_hold
+    assert all(holds(replace(spec, drive=c), design.staircase) for c in corners)
+    for corner in (corners[0], corners[-1]):  # all low, all high
+        rows = check_design(replace(design, spec=replace(spec, drive=corner)), None, fmu_dir)
+        assert all(r["first_step_stuck"] and r["slip_inside"] and r["brackets"] for r in rows)
