@@ -194,7 +194,8 @@ class Design:
                 "--step-hz", f"{self.spec.step_hz:g}", "--t-end", f"{self.t_end_s:.6g}",
                 "--comm-step", f"{CHECK_COMM_STEP:g}",
                 "--zeta", f"{d.zeta:.9g}", "--omega-n", f"{d.omega_n:.9g}",
-                "--tau-motor", f"{d.tau_motor:.9g}"]
+                "--tau-motor", f"{d.tau_motor:.9g}", "--l", f"{self.spec.ball.l:.9g}",
+                "--d", f"{self.spec.ball.d:.9g}"]
 
     def render_args(self) -> list[str]:
         """Arguments of ``abu render`` for this staircase and drive (add ``--mu``)."""
