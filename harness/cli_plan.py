@@ -291,7 +291,7 @@ def register(subparsers) -> None:
         "identify", help="fit the closed speed loop from a record of its response",
         description="Fit the setup's closed speed loop (zeta, omega_n[, tau_motor[, setpoint "
                     "weight]]) by least squares on the simulated response to the setpoint "
-                    "sequence, with 95 %% intervals, a residual check and the report's "
+                    "sequence, with 95 % intervals, a residual check and the report's "
                     "overshoot/settling method beside it; writes drive.json and fit.png.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--record", help="CSV with time_s and omega_rad_s or theta_rad "
