@@ -3,7 +3,10 @@
 and ``fmi2DoStep`` of every instance, each counted in ``_calls``."""
 from __future__ import annotations
 
+import ctypes
 from typing import Any
+
+from fmpy.fmi1 import FMICallException
 
 from .fmi import GETTERS, SETTERS, Guard, Instance, raw_accessor
 
@@ -40,12 +43,29 @@ class StepOps:
         with entry[1]:
             entry[0](values)
 
+    def _raw(self, inst: Instance) -> tuple:
+        """(component, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate, fmi2DoStep) raw
+        ctypes functions of ``inst`` (fmpy's wrappers cost a few us per call)."""
+        raw = self._fast.get(("raw", inst.name))
+        if raw is None or raw[0] != inst.slave.component:
+            f = inst.slave._functions
+            raw = (inst.slave.component, f["fmi2GetFMUstate"], f["fmi2SetFMUstate"],
+                   f["fmi2FreeFMUstate"], f["fmi2DoStep"])
+            self._fast[("raw", inst.name)] = raw
+        return raw
+
     def save_states(self) -> list[tuple[Instance, Any]]:
         states = []
         for inst in self._instances.values():
             self._calls += 1
             with Guard(inst, "fmi2GetFMUstate"):
-                states.append((inst, inst.slave.getFMUstate()))
+                if self.fmi_call_logger is not None:
+                    states.append((inst, inst.slave.getFMUstate()))
+                    continue
+                component, get, _, _, _ = self._raw(inst)
+                state = ctypes.c_void_p()
+                _check(get(component, ctypes.byref(state)), "fmi2GetFMUstate")
+                states.append((inst, state))
         return states
 
     def restore_states(self, states: list[tuple[Instance, Any]], inputs: bool) -> None:
@@ -54,7 +74,11 @@ class StepOps:
         for inst, state in states:
             self._calls += 1
             with Guard(inst, "fmi2SetFMUstate"):
-                inst.slave.setFMUstate(state)
+                if self.fmi_call_logger is not None:
+                    inst.slave.setFMUstate(state)
+                else:
+                    component, _, set_, _, _ = self._raw(inst)
+                    _check(set_(component, state), "fmi2SetFMUstate")
         if inputs:
             for inst, type_, vrs, values in self._last_sets:
                 self._set(inst, type_, vrs, values)
@@ -63,7 +87,11 @@ class StepOps:
         for inst, state in states:
             self._calls += 1
             try:
-                inst.slave.freeFMUstate(state)
+                if self.fmi_call_logger is not None:
+                    inst.slave.freeFMUstate(state)
+                else:
+                    component, _, _, free, _ = self._raw(inst)
+                    free(component, ctypes.byref(state))
             except Exception:
                 pass
 
@@ -71,4 +99,14 @@ class StepOps:
         for inst in self._instances.values():
             self._calls += 1
             with Guard(inst, "fmi2DoStep"):
-                inst.slave.doStep(t, h, noSetFMUStatePriorToCurrentPoint=False)
+                if self.fmi_call_logger is not None:
+                    inst.slave.doStep(t, h, noSetFMUStatePriorToCurrentPoint=False)
+                else:
+                    component, _, _, _, step = self._raw(inst)
+                    _check(step(component, t, h, 0), "fmi2DoStep")
+
+
+def _check(status: int, function: str) -> None:
+    """fmpy's rule: a status above fmi2Warning is an FMICallException."""
+    if status > 1:
+        raise FMICallException(function=function, status=status)
