@@ -275,6 +275,8 @@ case(["measure", "{files_dir}", "--out", "{files_dir}", "--overwrite"], "--out")
 case(["simulate", "--out", "{locked}"], "another abu run")
 case(["render", "--out", "{locked}"], "another abu run")
 case(["measure", "--tracks", "{tracks}", "--out", "{locked}"], "another abu run")
+case(["sweep", "--mu", "0.01", "--omega0-hz", "-17", "--out", "{locked_csv}"], "another abu run")
+case(["build-fmus", "--out", "{locked}"], "another abu run")
 # top level
 case(["no-such-command"], "no-such-command")
 case([], "COMMAND")
@@ -304,18 +306,22 @@ def test_bad_input(argv, needle, files, tmp_path, capsys):
     existing_csv = work / "previous.csv"
     existing_csv.write_text("previous\n")
     locked = work / "busy"
+    locked_csv = work / "busy.csv"
     mapping = {k: str(v) for k, v in files.items()}
     mapping.update(out=str(work / "out"), csv=str(work / "sweep.csv"),
                    missing=str(work / "missing.csv"), nonempty=str(nonempty),
                    existing_csv=str(existing_csv), locked=str(locked),
+                   locked_csv=str(locked_csv),
                    files_dir=str(files["tracks"].parent))
     args = _fill(argv, mapping)
     needle = needle.format(**{k: Path(v).name for k, v in mapping.items()})
     before = _listing(work)
     files_before = _listing(files["tracks"].parent)
     lock_fd = None
-    if "{locked}" in argv:  # another run holds the lock (flock conflicts between open files)
-        lock_fd = os.open(work / ".busy.lock", os.O_RDWR | os.O_CREAT)
+    held = [t for t in ("{locked}", "{locked_csv}") if t in argv]
+    if held:  # another run holds the lock (flock conflicts between open files)
+        name = Path(held[0].format(**mapping)).name
+        lock_fd = os.open(work / f".{name}.lock", os.O_RDWR | os.O_CREAT)
         fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         before = _listing(work)
     start = time.perf_counter()
