@@ -85,3 +85,18 @@ def test_modules_of_the_master_stay_small():
                  "system", "bounds", "experiments", "fmu_files"):
         lines = (harness / f"{name}.py").read_text().count("\n")
         assert lines <= 400, (name, lines)
+
+
+def test_a_failed_run_is_not_pooled_and_the_next_one_works(fmu_dir):
+    good = _experiment(2e-3).system(fmu_dir)
+    expected = reuse.run_system(good, -0.03, 0.1).values["omega"]
+    plant = good.component("plant")
+    bad_plant = replace(plant, parameters={**plant.parameters, "mu": -1.0})
+    bad = replace(good, components=tuple(bad_plant if c.name == "plant" else c
+                                         for c in good.components))
+    before = reuse.pooled()
+    with pytest.raises(CoSimulationError, match="mu"):
+        reuse.run_system(bad, -0.03, 0.1)
+    assert reuse.pooled() == before - 1  # the failed co-simulation was freed, not pooled
+    again = reuse.run_system(good, -0.03, 0.1).values["omega"]
+    assert list(again) == list(expected)
