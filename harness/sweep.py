@@ -3,7 +3,8 @@
 Python FMUs loaded into one process share its interpreter and GIL, so a sweep runs one
 co-simulation per *process*: a local cluster of worker processes by default, or any running
 Dask scheduler (``--scheduler tcp://host:8786``) for sweeps bigger than one machine. The FMUs
-are built once into a folder every worker can read.
+are built once into a folder every worker can read; each worker loads them once and resets and
+reuses the instances for its next points (:mod:`harness.reuse`).
 
 Result: one row per (mu, omega0) with the bounds, written as CSV (units in the header).
 """
