@@ -187,3 +187,19 @@ def test_two_runs_into_one_out(fmu_dir, tmp_path):
     assert summary["kind"] == "abu-simulate-summary"
     assert _rows(out / "result.csv") > 10 and summary["mu_low"] > 0
     assert _leftovers(tmp_path, "sim") == [] and _run_dirs(tmp_base) == []
+
+
+def test_swapped_seed_roles_are_refused(twin, tmp_path, capsys):
+    """The recording measured with the CD and ball seeds swapped: an error, not a number."""
+    from harness.cli import main
+
+    meta = json.loads((twin / "meta.json").read_text())
+    centre, cd, ball = meta["seeds"].split(";")
+    out = tmp_path / "m"
+    assert main(["measure", str(twin), "--out", str(out), "--no-plots", "--mc-draws", "0",
+                 "--quiet", "--seeds", f"{centre};{ball};{cd}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "swapped" in err[0] and "--seeds" in err[0]
+    assert not out.exists()
+    assert main(["measure", str(twin), "--out", str(out), "--no-plots", "--mc-draws", "0",
+                 "--quiet", "--seeds", meta["seeds"]]) == 0
