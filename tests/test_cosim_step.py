@@ -1,0 +1,43 @@
+"""The master's per-step work: no value read twice at a point, and the FMI calls of an
+ordinary step counted (the report's staircase, second-order hold)."""
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+from abu_model.params import PlantParams
+from harness.experiments import StaircaseExperiment
+from harness.master import CoSimulation
+
+HZ = 2.0 * math.pi
+
+
+def test_no_value_is_read_twice_per_point_and_an_ordinary_step_costs_24_calls(fmu_dir):
+    exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ, t0=0.0, te=1.0)
+    segments: list[list[tuple[str, int]]] = [[]]
+    calls_at_step: list[int] = []
+    with CoSimulation(exp.system(fmu_dir), exp.t_start, exp.t_end) as sim:
+        get, do_step = sim._get, sim.do_step
+
+        def logged_get(inst, type_, vrs):
+            segments[-1].extend((inst.name, type_, vr) for vr in vrs)
+            return get(inst, type_, vrs)
+
+        def logged_step(t, h):
+            segments.append([])
+            calls_at_step.append(sim._calls)
+            return do_step(t, h)
+
+        sim._get, sim.do_step = logged_get, logged_step
+        res = sim.run()
+    discontinuities = len(res.time_events) + len(res.switches) + 1  # + the stop time
+    twice = [seg for seg in segments[1:] if max(Counter(seg).values()) > 1]
+    # Only points with two sweeps (left and right limit of a time event) read an
+    # input-dependent output again; every other point reads each value once.
+    assert len(twice) <= discontinuities, len(twice)
+    per_step = Counter(b - a for a, b in zip(calls_at_step, calls_at_step[1:]))
+    # 3 fmi2GetFMUstate + 3 fmi2DoStep + 3 reads after the step + 11 in the sweep + 1 for
+    # the remaining probes + 3 fmi2FreeFMUstate
+    assert per_step.most_common(1)[0][0] == 24, per_step
+    print(f"\n[step] {res.stats['steps']} steps, {res.stats['fmi_calls']} FMI calls; calls "
+          f"between successive steps: {dict(per_step)}")
