@@ -1,0 +1,80 @@
+"""measurement.input_checks on a broad family of records: valid ones pass, still or swapped refused.
+
+Family: the exact stick/slip plant (tests/synthetic_tracks.py) with mu in {0.01, 0.02, 0.05, 0.3}
+(0.3: the ball never slips), ramp and staircase-like drives, tracking noise 0.05 px, lighting
+harmonic 0, 0.4 and 1 px, three noise seeds: 72 records. Printed with ``pytest -s``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from abu_model.errors import AbuError, ParameterError
+from measurement.input_checks import check_motion_and_roles, check_sampling
+
+from synthetic_tracks import measured_pixels, simulate
+
+
+def _swap(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    xs, ys = x.copy(), y.copy()
+    xs[:, [1, 2]] = xs[:, [2, 1]]
+    ys[:, [1, 2]] = ys[:, [2, 1]]
+    return xs, ys
+
+
+def test_role_check_on_a_family_of_records():
+    refused_valid, swapped_slipping, caught = 0, 0, 0
+    n = 0
+    for mu in (0.01, 0.02, 0.05, 0.3):
+        for kind in ("ramp", "steps"):
+            rec = simulate(mu, kind, n=1500)
+            slipped_by = float(np.ptp(rec.beta))  # how far the ball moved on the rim [rad]
+            for seed in range(3):
+                for harmonic in (0.0, 0.4, 1.0):
+                    x, y = measured_pixels(rec, sigma_px=0.05, harmonic_px=harmonic, seed=seed)
+                    n += 1
+                    try:
+                        check_motion_and_roles(rec.time, x, y, "record")
+                    except AbuError:
+                        refused_valid += 1
+                    if slipped_by > 0.02:
+                        swapped_slipping += 1
+                        try:
+                            check_motion_and_roles(rec.time, *_swap(x, y), "record")
+                        except AbuError as exc:
+                            caught += 1
+                            assert "swapped" in str(exc)
+    print(f"\nrole check: {n} valid records, {refused_valid} refused; swapped roles in the "
+          f"{swapped_slipping} records whose ball slips by > 0.02 rad: {caught} refused")
+    assert refused_valid == 0
+    assert swapped_slipping >= 18 and caught == swapped_slipping
+
+
+def test_still_markers_are_refused_and_a_slow_abu_passes():
+    rec = simulate(0.02, "steps", n=1500)
+    x, y = measured_pixels(rec, sigma_px=0.05, seed=0)
+    still_x = np.repeat(x[:1], len(x), axis=0)
+    still_y = np.repeat(y[:1], len(y), axis=0)
+    with pytest.raises(AbuError, match="hardly turns"):
+        check_motion_and_roles(rec.time, still_x, still_y, "record")
+    check_motion_and_roles(rec.time, x, y, "record")
+
+
+@pytest.mark.parametrize("fps,ok", [(4500.0, True), (1000.0, True), (240.0, False),
+                                    (45.0, False)])
+def test_sampling_limits(fps, ok):
+    time = np.arange(3000) / fps
+    kwargs = dict(fps_option="--fps", sg_window_s=0.02, polyorder=3, estimator="savgol",
+                  trim_s=None)
+    if ok:
+        check_sampling(time[: int(0.6 * fps)], "--fps", **kwargs)
+    else:
+        with pytest.raises(ParameterError, match="--fps"):
+            check_sampling(time, "--fps", **kwargs)
+
+
+def test_time_in_ms_names_the_file():
+    time_ms = np.arange(3000) / 4500.0 * 1e3
+    with pytest.raises(AbuError, match=r"tracks\.csv.*ms instead of s"):
+        check_sampling(time_ms, "tracks.csv", fps_option="--fps", sg_window_s=0.02,
+                       polyorder=3, estimator="savgol", trim_s=None)
