@@ -347,6 +347,13 @@ static fmi2Status finish(Inst *c, const char *fn, PyObject *result, PyObject **p
     return (fmi2Status)value;
 }
 
+/* finish() for a result this call owns and does not read: released here. */
+static fmi2Status finish_owned(Inst *c, const char *fn, PyObject *result) {
+    fmi2Status st = finish(c, fn, result, NULL);
+    if (result) py.Py_DecRef(result);
+    return st;
+}
+
 /* Common entry checks. Returns 0 if the call may proceed, else the status to return. */
 static int enter(Inst *c, const char *fn, fmi2Status *status) {
     if (c == NULL || !is_live(c)) { *status = fmi2Error; return 1; } /* nothing to log to */
@@ -539,8 +546,8 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn,
         logf_inst(c, fmi2Error, "fmi2SetDebugLogging: categories is NULL with nCategories = %zu", nCategories);
         st = fmi2Error;
     } else {
-        st = finish(c, "fmi2SetDebugLogging",
-                    py.PyObject_CallMethod(c->obj, "set_debug_logging", "(i)", (int)loggingOn), NULL);
+        st = finish_owned(c, "fmi2SetDebugLogging",
+                          py.PyObject_CallMethod(c->obj, "set_debug_logging", "(i)", (int)loggingOn));
     }
     END()
 }
@@ -548,16 +555,16 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn,
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                       fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     BEGIN("fmi2SetupExperiment")
-    st = finish(c, "fmi2SetupExperiment",
-                py.PyObject_CallMethod(c->obj, "setup_experiment", "(iddid)", (int)toleranceDefined,
-                                       tolerance, startTime, (int)stopTimeDefined, stopTime), NULL);
+    st = finish_owned(c, "fmi2SetupExperiment",
+                      py.PyObject_CallMethod(c->obj, "setup_experiment", "(iddid)", (int)toleranceDefined,
+                                             tolerance, startTime, (int)stopTimeDefined, stopTime));
     END()
 }
 
 #define SIMPLE(fminame, method)                                                           \
     EXPORT fmi2Status fminame(fmi2Component comp) {                                       \
         BEGIN(#fminame)                                                                   \
-        st = finish(c, #fminame, py.PyObject_CallMethod(c->obj, method, NULL), NULL);     \
+        st = finish_owned(c, #fminame, py.PyObject_CallMethod(c->obj, method, NULL));     \
         END()                                                                             \
     }
 SIMPLE(fmi2EnterInitializationMode, "enter_initialization_mode")
