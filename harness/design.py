@@ -339,6 +339,8 @@ def design_staircase(spec: DesignSpec) -> Design:
 def drive_corners(drive: Drive) -> list[Drive]:
     """The drive at every corner of its 95 % intervals (empty without intervals)."""
     names = [n for n in MODEL_PARAMETERS[drive.model] if n in drive.ci95]
+    if not names:
+        return []
     out = []
     for corner in itertools.product(*(drive.ci95[n] for n in names)):
         v = {n: drive.value(n) for n in MODEL_PARAMETERS["pi-lag-weighted"]}

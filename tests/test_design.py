@@ -97,6 +97,8 @@ def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
     design = design_staircase(spec)
     corners = drive_corners(drive)
     assert len(corners) == 8 and design.ci_corners_hold
+    assert drive_corners(Drive()) == [] and design_staircase(
+        DesignSpec(0.02, 0.04)).ci_corners_hold is None  # no intervals: nothing claimed
     assert all(holds(replace(spec, drive=c), design.staircase) for c in corners)
     for corner in (corners[0], corners[-1]):  # all low, all high
         rows = check_design(replace(design, spec=replace(spec, drive=corner)), None, fmu_dir)
