@@ -362,6 +362,11 @@ static int enter(Inst *c, const char *fn, fmi2Status *status) {
         *status = fmi2Error;
         return 1;
     }
+    if (!py.Py_IsInitialized()) { /* a Python host that has already finalised its interpreter */
+        logf_inst(c, fmi2Error, "%s: refused, the Python interpreter has been finalised", fn);
+        *status = fmi2Error;
+        return 1;
+    }
     return 0;
 }
 
@@ -520,6 +525,14 @@ EXPORT void fmi2FreeInstance(fmi2Component comp) {
 }
 
 static void destroy(Inst *c) {
+    if (!py.Py_IsInitialized()) { /* the host finalised Python: free only our own memory */
+        for (size_t i = 0; i < c->n_states; i++) free(c->states[i]);
+        free(c->states);
+        free(c->name);
+        c->magic = 0;
+        free(c);
+        return;
+    }
     PyGILState_STATE gil = py.PyGILState_Ensure();
     for (size_t i = 0; i < c->n_states; i++) {
         py.Py_DecRef(c->states[i]->obj);
@@ -815,9 +828,11 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     if (FMUstate == NULL || *FMUstate == NULL) return fmi2OK; /* nothing to free */
     for (size_t i = 0; i < c->n_states; i++) {
         if (c->states[i] == (State *)*FMUstate) {
-            PyGILState_STATE gil = py.PyGILState_Ensure();
-            py.Py_DecRef(c->states[i]->obj);
-            py.PyGILState_Release(gil);
+            if (py.Py_IsInitialized()) {
+                PyGILState_STATE gil = py.PyGILState_Ensure();
+                py.Py_DecRef(c->states[i]->obj);
+                py.PyGILState_Release(gil);
+            }
             c->states[i]->magic = 0;
             free(c->states[i]);
             c->states[i] = c->states[--c->n_states];
