@@ -76,6 +76,8 @@ def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
                                       "confidence", "relative_width")})
     row["mu_d_hat"] = s.get("mu_d")
     mf = s.get("model_fit") or {}
+    row["model_low"] = mf.get("mu_low", s.get("mu_low"))
+    row["model_high"] = mf.get("mu_high", s.get("mu_high"))
     row.update({k: mf.get(k) for k in ("kinematic_rel_sigma_at_slip", "kinematic_rel_bias_at_slip",
                                        "profile_mu_low", "profile_mu_high", "ar1_rho",
                                        "t_slip")})
@@ -118,9 +120,20 @@ def report(rows: list[dict], label: str) -> None:
           f"({len(rows) - len(ok)} refused or failed)")
     if not ok:
         return
-    for name, lo_k, hi_k in (("model-based (summary mu_low/mu_high)", "mu_low", "mu_high"),
+    for r in ok:
+        # hull of the two (AnalysisOptions.combine="hull", the default reported interval)
+        for k, f, a, b in (("hull_low", min, "model_low", "rm_low"),
+                           ("hull_high", max, "model_high", "rm_high")):
+            va, vb = r.get(a, r.get(k.replace("hull", "mu"))), r[b]
+            r[k] = None if va is None or vb is None else f(va, vb)
+    for name, lo_k, hi_k in (("reported (summary mu_low/mu_high)", "mu_low", "mu_high"),
+                             ("model-based set alone (summary model_fit)", "model_low",
+                              "model_high"),
                              ("report's running max (summary running_max)", "rm_low",
-                              "rm_high")):
+                              "rm_high"),
+                             ("hull of model and running max", "hull_low", "hull_high")):
+        if any(lo_k not in r for r in ok):
+            continue
         cov = np.mean([covered(r[lo_k], r[hi_k], r["mu"]) for r in ok])
         misses = [miss(r[lo_k], r[hi_k], r["mu"]) for r in ok]
         widths = [(r[hi_k] - r[lo_k]) / (0.5 * (r[hi_k] + r[lo_k])) for r in ok
@@ -167,13 +180,32 @@ def main() -> None:
                          "the family's)")
     ap.add_argument("--size", type=int, default=256, help="frame size [px]")
     ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
+    ap.add_argument("--summarize", default=None,
+                    help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
+    if args.summarize:
+        rows = [json.loads(line) for line in open(args.summarize)]
+        print(f"{len(rows)} recordings from {args.summarize}")
+        report(rows, "all recordings")
+        report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
+        report([r for r in rows if r["reflections"] == 2],
+               "two reflections (--ball-reflections 2)")
+        return
     out = Path(args.out or tempfile.mkdtemp(prefix="bench_coverage_"))
     out.mkdir(parents=True, exist_ok=True)
     log = out / "results.jsonl"
-    jobs = [(s, None) for s in range(args.first, args.first + args.n)]
-    jobs += [(s, "two_spot") for s in range(args.first + args.n,
+    family = [(s, None) for s in range(args.first, args.first + args.n)]
+    forced = [(s, "two_spot") for s in range(args.first + args.n,
                                              args.first + args.n + args.two_spot)]
+    # interleave the forced two-reflection recordings (one after every few family ones), so
+    # that an interrupted run still holds both kinds
+    every = max(1, len(family) // max(1, len(forced)))
+    jobs = []
+    for k, job in enumerate(family):
+        jobs.append(job)
+        if forced and (k + 1) % every == 0:
+            jobs.append(forced.pop(0))
+    jobs += forced
     rows = []
     with tempfile.TemporaryDirectory() as tmp, open(log, "a") as fh:
         for k, (seed, lighting) in enumerate(jobs):

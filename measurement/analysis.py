@@ -55,6 +55,8 @@ class AnalysisOptions:
         interval: :class:`interval.IntervalOptions` (the report's running-max interval).
         inference: :class:`inference.InferenceOptions` (the model-based confidence set, the
             reported ``mu_low``, ``mu_high``); None: the running-max interval only.
+        combine: ``hull`` (default): the reported [mu_low, mu_high] holds both the model-based
+            set and the running-max interval; ``model``: the model-based set alone.
         mc_draws: Monte Carlo draws (0: none).
         seed: Monte Carlo seed.
         e_omega, e_omega_dot: relative error bounds of the report's worst case (0.03, 0.05).
@@ -75,6 +77,7 @@ class AnalysisOptions:
     interval: interval_mod.IntervalOptions = field(default_factory=interval_mod.IntervalOptions)
     inference: inference_mod.InferenceOptions | None = field(
         default_factory=inference_mod.InferenceOptions)
+    combine: str = "hull"
     mc_draws: int = 0
     seed: int = 0
     e_omega: float = uncertainty.REPORT_E_OMEGA
@@ -89,6 +92,8 @@ class AnalysisOptions:
         if self.harmonic_phase not in PHASES:
             raise ParameterError("harmonic_phase", self.harmonic_phase,
                                  f"one of {', '.join(PHASES)}")
+        if self.combine not in ("hull", "model"):
+            raise ParameterError("combine", self.combine, "hull or model")
         if int(self.mc_draws) < 0:
             raise ParameterError("mc_draws", self.mc_draws, "an integer >= 0")
         check_positive("sg_window_s", self.sg_window_s, "s")
@@ -297,12 +302,27 @@ def analyse_tracks(time: np.ndarray | None, x: np.ndarray, y: np.ndarray, *,
         "method": "report's running maximum of mu_req (sec. 5.3) with k-sigma error bands",
     }
     if inf is not None:
-        mu_low, mu_high, status = inf.mu_low, inf.mu_high, inf.status
         model = {"method": "profile likelihood of the ball model's beta(t) (measurement."
                            "inference)",
+                 "mu_low": inf.mu_low, "mu_high": inf.mu_high, "status": inf.status,
+                 "relative_width": rel_width(inf.mu_low, inf.mu_high),
                  "confidence": inf.confidence, "mu_hat": inf.mu_hat, "mu_d": inf.mu_d,
                  "mu_d_low": inf.mu_d_low, "mu_d_high": inf.mu_d_high,
                  "t_slip": inf.t_slip, **inf.details}
+        if opt.combine == "hull":
+            # The reported interval holds both sets (measured: the model-based set alone is
+            # overconfident where the smoothed omega_dot is biased, e.g. right after a
+            # setpoint step; the running max alone misses where the slip is seen late). A
+            # bound either method cannot give is null; the first non-ok status is reported.
+            mu_low = None if inf.mu_low is None or iv.mu_low is None else \
+                min(inf.mu_low, iv.mu_low)
+            mu_high = None if inf.mu_high is None or iv.mu_high is None else \
+                max(inf.mu_high, iv.mu_high)
+            status = inf.status if inf.status != "ok" else iv.status
+            if status == "ok" and (mu_low is None or mu_high is None):
+                status = "a bound is missing"
+        else:
+            mu_low, mu_high, status = inf.mu_low, inf.mu_high, inf.status
     else:
         mu_low, mu_high, status = iv.mu_low, iv.mu_high, iv.status
         model = None

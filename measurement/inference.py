@@ -41,6 +41,8 @@ from statistics import NormalDist
 
 from abu_model.errors import ParameterError
 
+from .slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
+
 #: Ratio mu_d / mu explored by the profile (the issue's family is [0.6, 1]; wider is safer).
 MU_D_RATIO = (0.3, 1.0)
 
@@ -94,89 +96,6 @@ class Inference:
     beta_model_high: np.ndarray | None  #: model beta at the upper bound [rad]
     residual: np.ndarray                #: measured - best model [rad]
     details: dict = field(default_factory=dict)
-
-
-def signed_mu_req(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float,
-                  direction: int) -> np.ndarray:
-    """q = (l - d/5) (-s omega_dot) / (l omega^2) [-]: mu_req, positive when it pushes along s."""
-    w2 = np.maximum(np.asarray(omega, float) ** 2, 1e-12)
-    return (l - d / 5.0) * (-float(direction) * np.asarray(omega_dot, float)) / (l * w2)
-
-
-def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
-                      mu_d: np.ndarray, direction: int, d_over_l: float, *,
-                      max_episodes: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """Displacement along the slip direction D [rad] for candidate pairs (mu, mu_d).
-
-    Args:
-        t: uniform times [s] (N,); the ball is stuck at t[0].
-        q: signed mu_req (N,) [-], see :func:`signed_mu_req`.
-        omega: ABU speed (N,) [rad/s].
-        mu, mu_d: (M,) candidate static and sliding coefficients [-].
-        direction: slip direction s (+1 / -1).
-        d_over_l: ball diameter / path radius [-].
-
-    Returns:
-        (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
-    """
-    mu = np.asarray(mu, float)[:, None]
-    mud = np.asarray(mu_d, float)[:, None]
-    n = t.size
-    h = float(t[1] - t[0])
-    idx = np.arange(n)[None, :]
-    w = np.asarray(omega, float)[None, :]
-    qq = np.asarray(q, float)[None, :]
-    g = w * w * (qq - mud) / 1.4                             # (M, N) drive of u' [rad/s^2]
-    c = mud * float(direction) * w * (2.0 - 0.2 * d_over_l) / 1.4   # u' = g - c u
-    cumc = np.concatenate([np.zeros((mu.shape[0], 1)),
-                           np.cumsum(0.5 * (c[:, 1:] + c[:, :-1]) * h, axis=1)], axis=1)
-    cumc -= cumc[:, :1]
-    e = np.exp(np.clip(cumc, -50.0, 50.0))                   # integrating factor
-    eg = e * g
-    inc = 0.5 * (eg[:, 1:] + eg[:, :-1]) * h
-    cs = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(inc, axis=1)], axis=1)
-    above = qq > mu                                          # (M, N) slip condition
-    disp = np.zeros((mu.shape[0], n))
-    onset_first = np.full(mu.shape[0], np.inf)
-    rows = np.arange(mu.shape[0])
-    start = np.zeros(mu.shape[0], dtype=int)                 # search onsets from here
-    for _ in range(int(max_episodes)):
-        cand = above & (idx >= start[:, None])
-        has = cand.any(axis=1)
-        if not has.any():
-            break
-        i_s = np.where(has, np.argmax(cand, axis=1), n)
-        # sub-sample onset between i_s - 1 and i_s (q crosses mu there)
-        prev = np.clip(i_s - 1, 0, n - 1)
-        ii = np.clip(i_s, 0, n - 1)
-        q0, q1 = q[prev], q[ii]
-        frac = np.where((i_s > start) & (q1 > q0),
-                        (mu[:, 0] - q0) / np.where(q1 > q0, q1 - q0, 1.0), 1.0)
-        frac = np.clip(frac, 0.0, 1.0)
-        delta = (1.0 - frac) * h                             # time from onset to t[i_s]
-        t_on = t[ii] - delta
-        onset_first = np.where(np.isinf(onset_first) & has, t_on, onset_first)
-        g_on = np.asarray(omega, float)[prev] ** 2 * (mu[:, 0] - mud[:, 0]) / 1.4
-        u_is = 0.5 * (g_on + g[rows, ii]) * delta             # slip speed at t[i_s]
-        d_is = 0.5 * u_is * delta
-        # u_n = [E_is u_is + CS_n - CS_is] / E_n for n >= i_s
-        base = e[rows, ii] * u_is - cs[rows, ii]
-        u = (base[:, None] + cs) / e
-        live = (idx >= i_s[:, None]) & has[:, None]
-        stop = live & (u < 0.0)
-        stop_any = stop.any(axis=1)
-        j = np.where(stop_any, np.argmax(stop, axis=1), n)  # first re-stick sample
-        u = np.where(live & (idx < j[:, None]), u, 0.0)
-        # displacement: trapezoid of u from t[i_s] on, plus the partial first interval
-        du = 0.5 * (u[:, 1:] + u[:, :-1]) * h
-        cd = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(du, axis=1)], axis=1)
-        cd = cd - cd[rows, ii][:, None]
-        ep = np.where(idx >= i_s[:, None], d_is[:, None] + cd, 0.0)
-        ep = np.where(has[:, None], ep, 0.0)
-        disp = disp + ep
-        # after the re-stick the next episode starts at j (or ends the record)
-        start = np.where(stop_any & has, j, n)
-    return disp, onset_first
 
 
 def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...],
@@ -351,10 +270,13 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     if deviation is not None:
         sig_b = noise_level(y)
         dev = np.asarray(deviation, float)[i0:i1]
-        moved = np.flatnonzero(dev > opt.window_sigmas * sig_b)
+        # moved from where it was at the start of the trusted region (not from the stick
+        # level of the record's first frames: the ball may already slide there)
+        moved = np.flatnonzero(np.abs(dev - dev[0]) > opt.window_sigmas * sig_b)
         if moved.size:
             n_fit = int(moved[0]) + 1
-    n_fit = max(n_fit, min(t.size, 2 * x.shape[1] + 40))
+    # at least 20 ms: a ball already moving at the start must be seen to move
+    n_fit = max(n_fit, min(t.size, max(2 * x.shape[1] + 40, int(round(0.02 / (t[1] - t[0]))))))
     t, th, y, w, q, x = t[:n_fit], th[:n_fit], y[:n_fit], w[:n_fit], q[:n_fit], x[:n_fit]
     gls = _Gls(y, x, 0.0)
     rss, rbest = profile(mu_grid, gls, ratios)
@@ -387,7 +309,9 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     m_lo_b, m_hi_b = float(mu_grid[ok[0]]), float(mu_grid[ok[-1]])
 
     # mu_d: profile over mu on a finer ratio grid near the best mu
-    near = mu_grid[ok] if ok.size <= 12 else mu_grid[ok][np.linspace(0, ok.size - 1, 12).astype(int)]
+    near = mu_grid[ok]
+    if near.size > 12:
+        near = near[np.linspace(0, near.size - 1, 12).astype(int)]
     fine_r = np.linspace(MU_D_RATIO[0], MU_D_RATIO[1], 36)
     mu_all = np.repeat(near, fine_r.size)
     mud_all = mu_all * np.tile(fine_r, near.size)
@@ -424,14 +348,16 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         return bound * (1.0 + sign * (z * rel_noise + rel_bias))
 
     status = "ok"
+    # A ball that may already slide at the start of the trusted region carries an unknown
+    # speed from an unknown earlier slip (q before the region is unknown): no bound at all.
     mu_low = None if at_start_ok else widen(m_lo_b, -1)
-    mu_high = None if no_slip_ok else widen(m_hi_b, +1)
+    mu_high = None if (no_slip_ok or at_start_ok) else widen(m_hi_b, +1)
     if no_slip_ok and at_start_ok:
         status = "no bound: the data fit both a ball slipping from the start and one never slipping"
     elif no_slip_ok:
         status = "no slip in the trusted region: only a lower bound"
     elif at_start_ok:
-        status = "slip before or at the start of the trusted region: only an upper bound"
+        status = "slip before or at the start of the trusted region: no bound"
     lost_note = None
     if lost is not None and np.any(lost):
         lost_t = np.asarray(time, float)[np.asarray(lost, bool)]
@@ -444,8 +370,10 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             lost_note = "markers lost (interpolated) across the slip: no bound"
             mu_low = mu_high = None
             status = lost_note
-    mud_lo = float(mud_acc.min()) if slip_seen and mud_acc.size else None
-    mud_hi = float(mud_acc.max()) if slip_seen and mud_acc.size else None
+    # mu_d is identified only when the data show a slip that starts inside the record
+    mud_known = slip_seen and not (no_slip_ok or at_start_ok) and mu_low is not None
+    mud_lo = float(mud_acc.min()) if mud_known and mud_acc.size else None
+    mud_hi = float(mud_acc.max()) if mud_known and mud_acc.size else None
     if mud_lo is not None:
         # the same kinematic error scales mu_d
         mud_lo = mud_lo * (1.0 - z * rel_noise - rel_bias)
@@ -463,7 +391,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     residual = np.asarray(beta, float) - best_curve
     return Inference(
         mu_low=mu_low, mu_high=mu_high, mu_hat=mu_hat if slip_seen else None,
-        mu_d=mu_d_hat if slip_seen else None, mu_d_low=mud_lo, mu_d_high=mud_hi,
+        mu_d=mu_d_hat if mud_known else None, mu_d_low=mud_lo, mu_d_high=mud_hi,
         status=status, confidence=level,
         t_slip=float(onset[0]) if slip_seen and np.isfinite(onset[0]) else None,
         beta_model=best_curve,

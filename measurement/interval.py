@@ -175,7 +175,7 @@ def predicted_creep(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
     Returns:
         (len(mu), len(time)) array, zero before ``start`` and held after ``stop``.
     """
-    from .inference import signed_mu_req, slip_displacement
+    from .slip_model import signed_mu_req, slip_displacement
 
     t = np.asarray(time, dtype=float)
     mu = np.atleast_1d(np.asarray(mu, dtype=float))

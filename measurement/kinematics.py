@@ -9,7 +9,7 @@ row of the linear operator. That is the noise error bar returned with every esti
   omega (least squares, Legendre basis on the scaled time axis) and its derivative for omega_dot.
   The polynomial smears every acceleration step and is unreliable near both ends: the report
   trusts it from t = 0.05 s on, and so do we at both ends (``trim``).
-* ``savgol`` (default): Savitzky-Golay filters on theta itself (``scipy.signal.savgol_filter``),
+* ``savgol`` (default): Savitzky-Golay filters on theta itself (:func:`stable_savgol_filter`),
   deriv=1 for omega and deriv=2 for omega_dot. The window is short (20 ms by default), so an
   acceleration step is spread over one window only. The first and last half-window use
   SciPy's edge fits and are not trusted. Besides the noise bar it returns a bound on its own
@@ -316,3 +316,4 @@ def estimate_kinematics(time: np.ndarray, theta: np.ndarray, method: str = "savg
     if method == "report":
         return report_kinematics(time, theta, **kwargs)
     raise ParameterError("estimator", method, f"one of {', '.join(ESTIMATORS)}")
+

@@ -1,0 +1,146 @@
+"""The model-based confidence set on mu (measurement.inference): coverage on many seeded
+recordings of the harsh twin's family, null bounds with a status, the slip integration against
+the exact plant.
+
+Coverage here (a smaller version of ``benchmarks/bench_coverage.py``, which renders and tracks
+raw frames): the harsh twin's random drives (``measurement.scenario.random_scenario``: PI
+staircases with setpoint weighting / filters, smooth acceleration profiles, torque lags 0-30 ms,
+mu in [0.005, 0.06], mu_d / mu in [0.6, 1]) are simulated on the exact plant and its camera
+geometry (lens distortion, eccentric centre marker); the marker tracks get white tracking
+noise and a lighting disturbance of the ball's apparent centre with harmonics 1-3 of the ball's
+angle (the cause of the report's harmonic, sec. 5.2), of the size measured on the rendered
+twin. Rendering 30 recordings would cost
+minutes; the image chain is covered by the benchmark and by tests/test_end_to_end_twin.py.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from abu_model.params import BallParams, PlantParams
+from abu_model.plant import AbuPlant
+from measurement.analysis import analyse_tracks
+from measurement.slip_model import signed_mu_req, slip_displacement
+
+from synthetic_tracks import measured_pixels, simulate
+
+N_COVERAGE = 30
+TWO_PI = 2.0 * math.pi
+
+
+def scenario_tracks(seed: int, n_frames: int = 2400):
+    """(times, x, y, ball, truth) of one drawn scenario at the tracks level."""
+    from measurement.scenario import random_scenario, simulate_scenario
+    scn = random_scenario(seed, n_frames=n_frames)
+    state, pos = simulate_scenario(scn)
+    rng = np.random.default_rng([seed, 7])
+    phi = state["theta"] + state["beta"]
+    shift = np.zeros((phi.size, 2))
+    for k in (1, 2, 3):     # apparent-centre shift of the lit ball, fixed lamps: f(phi)
+        # amplitudes of the size measured on the rendered twin (~0.1 px, 0.003 rad on beta)
+        a, p = rng.uniform(0.02, 0.12) / k, rng.uniform(0, TWO_PI, 2)
+        shift[:, 0] += a * np.cos(k * phi + p[0])
+        shift[:, 1] += a * np.sin(k * phi + p[1])
+    pts = [pos["centre"], pos["cd"], pos["ball"] + shift]
+    sigma = rng.uniform(0.008, 0.02)
+    x = np.stack([p[:, 0] for p in pts], axis=1) + sigma * rng.standard_normal((phi.size, 3))
+    y = np.stack([p[:, 1] for p in pts], axis=1) + sigma * rng.standard_normal((phi.size, 3))
+    return scn.times, x, y, scn.ball, state
+
+
+def test_coverage_of_the_stated_interval_on_the_harsh_family():
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    rows = []
+    for seed in range(N_COVERAGE):
+        times, x, y, ball, state = scenario_tracks(seed)
+        _, s = analyse_tracks(times, x, y, l=ball.l, d=ball.d)
+        mu = ball.mu
+        lo, hi = s["mu_low"], s["mu_high"]
+        inside = (lo is None or lo <= mu) and (hi is None or mu <= hi)
+        miss = 0.0 if inside else max((lo or 0.0) - mu, mu - (hi if hi is not None else 9)) / mu
+        rows.append({"seed": seed, "mu": mu, "lo": lo, "hi": hi, "inside": inside,
+                     "miss": miss, "status": s["status"], "width": s["relative_width"]})
+        # a null bound is never reported as "ok"
+        assert (lo is not None and hi is not None) == (s["status"] == "ok"), s["status"]
+    coverage = float(np.mean([r["inside"] for r in rows]))
+    widths = [r["width"] for r in rows if r["width"] is not None]
+    big = [r for r in rows if r["miss"] > 0.02]
+    print(f"\nharsh-twin drives at the tracks level, {N_COVERAGE} recordings "
+          f"(measurement.scenario seeds 0..{N_COVERAGE - 1}, 2400 frames): coverage of the "
+          f"stated 95 % interval {coverage:.0%}, missing mu by > 2 %: {len(big)}, median "
+          f"relative width {np.median(widths):.1%}, 90th percentile "
+          f"{np.percentile(widths, 90):.1%}, bounds null in "
+          f"{sum(r['status'] != 'ok' for r in rows)}")
+    assert coverage >= 0.90, [r for r in rows if not r["inside"]]
+    # Issue 7's target is no interval missing mu by more than 2 %; NOT met yet: 3 of these 30
+    # miss by 2.3-3 % (smoothing bias of omega_dot right after a setpoint step, see
+    # docs/measurement-analysis.md, "Limits"). This bound keeps it from getting worse.
+    assert len(big) <= 3 and all(r["miss"] < 0.05 for r in big), big
+
+
+def test_never_slipping_record_has_a_null_upper_bound():
+    rec = simulate(0.03, "steps", n=1500)            # max mu_req ~0.023: the ball never slips
+    assert math.isinf(rec.t_slip)
+    x, y = measured_pixels(rec, sigma_px=0.03, harmonic_px=0.4, seed=2)
+    _, s = analyse_tracks(rec.time, x, y, l=rec.l, d=rec.d)
+    assert s["mu_high"] is None and s["status"] != "ok"
+    assert s["status"].startswith("no slip")
+    assert s["mu_low"] is not None and s["mu_low"] <= rec.mu
+    assert s["mu_d"] is None and s["mu_d_low"] is None
+
+
+def test_record_slipping_before_the_trusted_region_has_a_null_lower_bound():
+    rec = simulate(0.003, "steps", n=1500)           # slips at the first step, 10 ms, before
+    assert rec.t_slip < 0.018                        # the trusted region starts (18 ms)
+    x, y = measured_pixels(rec, sigma_px=0.03, harmonic_px=0.4, seed=3)
+    _, s = analyse_tracks(rec.time, x, y, l=rec.l, d=rec.d)
+    assert s["estimator"]["trusted_start_s"] > rec.t_slip
+    assert s["mu_low"] is None and s["status"] != "ok"
+    assert "before" in s["status"] or "start" in s["status"]
+
+
+def test_lost_markers_across_the_slip_null_both_bounds():
+    rec = simulate(0.012, "ramp", n=1500)
+    x, y = measured_pixels(rec, sigma_px=0.03, seed=5)
+    lost = np.zeros((rec.time.size, 3), dtype=bool)
+    i = int(rec.t_slip * 4500)
+    lost[i - 2: i + 2, 2] = True                     # the ball lost for 4 frames at the slip
+    _, s = analyse_tracks(rec.time, x, y, l=rec.l, d=rec.d, lost=lost)
+    assert s["mu_low"] is None and s["mu_high"] is None
+    assert "lost" in s["status"]
+    lost_far = np.zeros_like(lost)
+    lost_far[100:103, 2] = True                      # far from the slip: no effect
+    _, s2 = analyse_tracks(rec.time, x, y, l=rec.l, d=rec.d, lost=lost_far)
+    assert s2["status"] == "ok" and s2["mu_low"] <= rec.mu <= s2["mu_high"]
+
+
+@pytest.mark.parametrize("mu_d_ratio", [1.0, 0.7])
+def test_slip_integration_matches_the_exact_plant(mu_d_ratio):
+    """The vectorised (cumulative-sum) slip model against abu_model.plant.AbuPlant, an
+    independent event-located integrator, on a linear acceleration ramp (report sec. 4.1)."""
+    mu = 0.008
+    ball = BallParams(mu=mu, mu_d=mu * mu_d_ratio)
+    plant = AbuPlant(PlantParams(ball=ball, J_abu=4.5e-5), omega0=-2 * math.pi * 9)
+    fps, n = 4500.0, 1500
+    t = np.arange(n) / fps
+    omega, alpha, beta = np.empty(n), np.empty(n), np.empty(n)
+    for k in range(n):
+        st = plant.state
+        omega[k], beta[k] = st.omega, st.beta
+        alpha[k] = -300.0 * t[k]
+        if k < n - 1:
+            plant.advance(1.0 / fps, 4.5e-5 * alpha[k], 4.5e-5 * -300.0)
+    q = signed_mu_req(omega, alpha, ball.l, ball.d, +1)
+    disp, onset = slip_displacement(t, q, omega, np.array([mu]), np.array([ball.mu_dynamic]),
+                                    +1, ball.d / ball.l)
+    true = beta - beta[0]
+    assert true[-1] > 0.01                           # the ball slipped well within the record
+    t_true = t[np.flatnonzero(true > 0)[0] - 1]
+    assert abs(onset[0] - t_true) < 2.0 / fps
+    # the linearised model reproduces the plant's displacement within 2 %
+    np.testing.assert_allclose(disp[0, -1], true[-1], rtol=0.02)
+    big = true > 0.1 * true[-1]
+    np.testing.assert_allclose(disp[0][big], true[big], rtol=0.03)
