@@ -70,12 +70,15 @@ class Runner:
                 target, n_grid = self._propose(t, n_grid, h)
                 slack = 0.0 if self.control is None else STRETCH * (target - t)
                 t_event, owners = next_events(plan.events, values, t, sim.event_tol)
-                hit_event = t_event <= target + max(slack, sim.event_tol)
+                limit = min(t_event, sim.stop_time)  # the earlier of the event and the end
+                if limit <= target + max(slack, sim.event_tol):
+                    target = limit
+                hit_event = abs(t_event - target) <= sim.event_tol
                 if hit_event:
                     target = t_event
-                if sim.stop_time - target <= max(slack, sim.event_tol):
-                    target = sim.stop_time
                 event_at_stop = hit_event and abs(target - sim.stop_time) <= sim.event_tol
+                if event_at_stop:
+                    target = sim.stop_time
                 t_new, values, before, snap, h = self._step(
                     t, target, hit_event, owners, before, snap, event_at_stop, h)
                 if bar is not None:

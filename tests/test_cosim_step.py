@@ -41,3 +41,17 @@ def test_no_value_is_read_twice_per_point_and_an_ordinary_step_costs_24_calls(fm
     assert per_step.most_common(1)[0][0] == 24, per_step
     print(f"\n[step] {res.stats['steps']} steps, {res.stats['fmi_calls']} FMI calls; calls "
           f"between successive steps: {dict(per_step)}")
+
+
+def test_an_event_just_before_the_stop_time_is_still_taken(fmu_dir):
+    # The stop time 0.1 ms after a setpoint step: within the 20 % stretch of a step that would
+    # otherwise reach past both; the master must land on the step, then on the stop time.
+    base = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ, t0=0.0, te=1.0)
+    t_step = base.staircase.step_times[1]
+    exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ, t0=0.0, te=1.0,
+                              t_end=t_step + 1e-4)
+    with CoSimulation(exp.system(fmu_dir), exp.t_start, exp.t_end) as sim:
+        res = sim.run()
+    at_step = res.side[res.time == t_step]
+    assert list(at_step) == [-1, 1] and t_step in res.time_events
+    assert res.time[-1] == exp.t_end and res.side[-1] == 0
