@@ -77,21 +77,12 @@ def dumps(obj: Any) -> str:
 
 def format_table_csv(table: dict[str, np.ndarray]) -> str:
     """CSV text of a table of equal-length columns (names carry the units)."""
+    from .tracks_io import table_csv_text
     names = list(table)
-    cols = [np.asarray(table[n]) for n in names]
     # Plain CSV (no comment line): units are in the column names (_s, _rad, _rad_s, _rad_s2);
-    # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball.
-    lines = [",".join(names)]
-    for i in range(cols[0].shape[0]):
-        cells = []
-        for c in cols:
-            v = c[i]
-            if np.issubdtype(c.dtype, np.integer):
-                cells.append(str(int(v)))
-            else:
-                cells.append("" if not math.isfinite(float(v)) else f"{float(v):.10g}")
-        lines.append(",".join(cells))
-    return "\n".join(lines) + "\n"
+    # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball;
+    # non-finite values are empty cells.
+    return table_csv_text(names, [np.asarray(table[n]) for n in names])
 
 
 def _log(args: argparse.Namespace, message: str) -> None:
