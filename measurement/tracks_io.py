@@ -31,6 +31,7 @@ import csv
 import io
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -274,6 +275,22 @@ def angles_from_pixels(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.nda
     return theta, beta
 
 
+_NAN_CELL = re.compile(r"(?<![^,\n])(?:nan|-?inf)(?![^,\n])")
+
+
+def table_csv_text(names: list[str], cols: list[np.ndarray], float_format: str = "%.10g") -> str:
+    """Plain CSV text (header, rows) of equal-length columns; integer columns as integers,
+    non-finite floats as empty cells. Formatted row-wise in C by ``np.savetxt`` (a Python loop
+    over cells cost ~0.3 s of ``abu measure`` for 3072 frames)."""
+    arrays = [np.asarray(c) for c in cols]
+    fmts = ["%d" if np.issubdtype(a.dtype, np.integer) else float_format for a in arrays]
+    data = np.column_stack([a.astype(float) for a in arrays]) if arrays else np.zeros((0, 0))
+    buf = io.StringIO()
+    buf.write(",".join(names) + "\n")
+    np.savetxt(buf, data, fmt=fmts, delimiter=",")
+    return _NAN_CELL.sub("", buf.getvalue())
+
+
 def format_tracks_csv(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, x: np.ndarray,
                       y: np.ndarray, lost: np.ndarray | None = None) -> str:
     """The text of a ``tracks.csv`` (header with units in the names, one row per frame)."""
@@ -282,12 +299,8 @@ def format_tracks_csv(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, x: 
     cols = [np.asarray(time), np.asarray(theta), np.asarray(beta)]
     for j in range(3):
         cols += [np.asarray(x)[:, j], np.asarray(y)[:, j]]
-    buf = io.StringIO()
-    buf.write(",".join(OUTPUT_COLUMNS) + "\n")
-    for i in range(n):
-        # repr-precision floats: the file round-trips exactly.
-        buf.write(",".join(repr(float(c[i])) for c in cols) + f",{int(mask[i])}\n")
-    return buf.getvalue()
+    # 17 significant digits: the file round-trips exactly
+    return table_csv_text(list(OUTPUT_COLUMNS), cols + [np.asarray(mask, dtype=int)], "%.17g")
 
 
 def write_tracks_csv(path: str | os.PathLike, time: np.ndarray, x: np.ndarray, y: np.ndarray,
