@@ -96,6 +96,7 @@ def check_plant(args: argparse.Namespace) -> None:
         raise ParameterError("--mu", args.mu, "a friction coefficient > 0 (with mu = 0 the ball "
                              "slips at once: there is no stick period to measure)")
     in_range("--mu", args.mu, 0.0, 2.0, "", "dry friction coefficients are below about 1")
+    in_range("--beta0", args.beta0, -1000.0, 1000.0, "rad", "an initial angle")
     if args.tau_motor > 1.0:
         raise ParameterError("--tau-motor", args.tau_motor, "a lag of at most 1 s (a CD drive's "
                              "motor answers in milliseconds)")

@@ -38,6 +38,24 @@ MAX_MC_DRAWS = 100_000
 MAX_POLY_DEGREE = 30
 MAX_FPS = 1.0e7
 MAX_RECORD_S = 100.0
+#: Ranges of the render options (option, low, high, unit, why); checked when present.
+RENDER_RANGES = (
+    ("--mu", 0.0, 2.0, "", "dry friction coefficients are below about 1"),
+    ("--omega0-hz", -1000.0, 1000.0, "Hz", "CD drives spin at most about 200 Hz"),
+    ("--omega-end-hz", -1000.0, 1000.0, "Hz", "CD drives spin at most about 200 Hz"),
+    ("--t0", -100.0, 100.0, "s", "start of the staircase; the report's record lasts 0.68 s"),
+    ("--te", 1e-6, 100.0, "s", "duration of the staircase; the report's is 0.5 s"),
+    ("--beta0", -1000.0, 1000.0, "rad", "an initial angle"),
+    ("--zeta", 1e-6, 1000.0, "", "a damping ratio"),
+    ("--omega-n", 1e-6, 1e4, "rad/s", "the drive's natural frequency; the twin's is 12"),
+    ("--tau-motor", 0.0, 1.0, "s", "a motor answers in milliseconds"),
+    ("--noise", 0.0, 255.0, "grey levels", "8-bit frames"),
+    ("--gradient", -255.0, 255.0, "grey levels/px", "8-bit frames"),
+    ("--ball-shift-px", -100.0, 100.0, "px", "an offset of the ball's apparent centre"),
+    ("--exposure-fraction", 0.0, 1.0, "", "exposure / frame interval"),
+    ("--pixel-size", 1e-7, 1e-2, "m/px", "the camera's pixel size on the ABU"),
+    ("--seed", 0, 2**63 - 1, "", "a noise seed (non-negative)"),
+)
 DEFAULT_L = 1.15e-2
 DEFAULT_D = 3.0e-3
 
@@ -182,6 +200,7 @@ def _analysis_options(args: argparse.Namespace):
     from .analysis import AnalysisOptions
     from .inference import InferenceOptions
     from .interval import IntervalOptions
+    integer_range("--seed", args.seed, 0, 2**63 - 1, "a Monte Carlo seed (non-negative)")
     integer_range("--mc-draws", args.mc_draws, 0, MAX_MC_DRAWS,
                   "each draw reruns the analysis, about 50 ms")
     integer_range("--poly-degree", args.poly_degree, 1, MAX_POLY_DEGREE,
@@ -222,8 +241,10 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if getattr(args, "drive", None):  # a bad drive.json fails before the tracking
         from controller.drive import load_drive
         load_drive(args.drive)
-    l = _positive("--l", args.l, "m")
-    d = _positive("--d", args.d, "m")
+    l = in_range("--l", _positive("--l", args.l, "m"), 1e-4, 1.0, "m",
+                 "radius of the ball centre's path; a CD drive's is 1.15e-2 m")
+    d = in_range("--d", _positive("--d", args.d, "m"), 1e-5, 0.1, "m",
+                 "ball diameter; the report's is 3e-3 m")
     fps_opt = _positive("--fps", args.fps, "frames/s")
     options = _analysis_options(args)
     out = Path(args.out)
@@ -373,6 +394,15 @@ def _check_render_options(args: argparse.Namespace) -> None:
                     "pixels", "the recording is rendered in memory")
     count_limit("--frames", args.frames, args.frames / args.fps, MAX_RECORD_S, "s of recording",
                 "each frame is simulated and rendered; the report's record lasts 0.68 s")
+    for option, low, high, unit, why in RENDER_RANGES:
+        value = getattr(args, option[2:].replace("-", "_"), None)
+        if value is not None and not isinstance(value, str):
+            if isinstance(value, int) and not isinstance(value, bool) and option == "--seed":
+                integer_range(option, value, int(low), int(high), why)
+            else:
+                in_range(option, value, low, high, unit, why)
+    if getattr(args, "mu", 1.0) is not None and getattr(args, "mu", 1.0) <= 0:
+        raise ParameterError("--mu", args.mu, "a friction coefficient > 0")
 
 
 def cmd_render(args: argparse.Namespace) -> int:

@@ -174,7 +174,7 @@ for opt, values in {
     "--l": ["0", "-1", "nan"],
     "--j-abu": ["0", "-1", "nan"],
     "--tau-motor": ["-1", "nan", "10"],
-    "--beta0": ["nan", "inf"],
+    "--beta0": ["nan", "inf", "1e300"],
 }.items():
     for v in values:
         case(S + [opt, v], opt)
@@ -222,8 +222,11 @@ case(["build-fmus", "--out", "{afile}"], "--out")
 case(["build-fmus", "--out", "{afile}/sub"], "a_file")
 # render
 for opt, values in {"--frames": ["100000000", "0", "1e8"], "--fps": ["1e-3", "nan", "0", "1e9"],
-                    "--mu": ["-1", "nan"], "--te": ["0", "nan"],
-                    "--omega0-hz": ["nan"]}.items():
+                    "--mu": ["-1", "nan", "0", "1e300"], "--te": ["0", "nan", "1e300"],
+                    "--t0": ["-1e300"], "--seed": ["-1"], "--noise": ["1e300", "-1"],
+                    "--gradient": ["1e300"], "--ball-shift-px": ["1e300"],
+                    "--pixel-size": ["1e300", "0"], "--exposure-fraction": ["2"],
+                    "--beta0": ["1e300"], "--omega0-hz": ["nan", "-1e6"]}.items():
     for v in values:
         case(["render", "--out", "{out}", opt, v], opt)
 case(["render", "--out", "{afile}"], "--out")
@@ -246,7 +249,8 @@ case(MT + ["--estimator", "report", "--poly-degree=-1"], "--poly-degree")
 case(MT + ["--estimator", "report", "--poly-degree", "100"], "--poly-degree")
 for opt, values in {"--trim-s": ["10", "-1", "nan"], "--sg-window-s": ["0", "nan", "5", "-0.02"],
                     "--k-sigma": ["0", "nan", "1e9"], "--mc-draws": ["-1", "10000000"],
-                    "--l": ["0", "nan", "-1"], "--d": ["0", "1", "nan"],
+                    "--l": ["0", "nan", "-1", "1e300"], "--d": ["0", "1", "nan", "1e300"],
+                    "--seed": ["-1"],
                     "--fps": ["1e9", "nan"], "--estimator": ["magic"], "--lower": ["x"]}.items():
     for v in values:
         case(MT + [opt, v], opt)
