@@ -202,6 +202,15 @@ def check_float_options(parser: argparse.ArgumentParser, args: argparse.Namespac
     """Every ``type=float`` option holds finite numbers (no option here means anything by inf or
     NaN, and they would otherwise travel into a computation)."""
     for action in parser._actions:
+        if action.type is None and not action.choices and action.nargs != 0 and \
+                action.dest not in ("help", "command", "func"):
+            value = getattr(args, action.dest, None)
+            for v in value if isinstance(value, list) else [value]:
+                if isinstance(v, str) and not v.strip():
+                    name = action.option_strings[0] if action.option_strings else \
+                        (action.metavar or action.dest.upper())
+                    raise ParameterError(name, v, "a non-empty value (an empty path would mean "
+                                         "the current folder or nothing)")
         if action.type is not float or not action.option_strings:
             continue
         value = getattr(args, action.dest, None)

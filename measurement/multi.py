@@ -92,7 +92,8 @@ def read_intervals(paths: list[str | os.PathLike]) -> list[dict]:
     for path in paths:
         p = Path(path)
         if not p.is_file():
-            raise IntervalInputError(f"{p}: file not found")
+            raise IntervalInputError(f"{p}: " + ("not a regular file" if p.exists()
+                                                 else "file not found"))
         if p.suffix.lower() == ".csv":
             with open(p, newline="", encoding="utf-8") as handle:
                 rows = [r for r in csv.reader(handle) if r and not r[0].lstrip().startswith("#")]
