@@ -138,6 +138,18 @@ def _missing_parents(path: Path) -> list[Path]:
     return missing
 
 
+def _check_replaceable(target: Path, option: str) -> None:
+    """--overwrite replaces a run's folder, never the root, the home folder or the folder the
+    user works in (or one above it)."""
+    resolved = target.resolve()
+    protected = {Path("/").resolve(), Path.home().resolve()}
+    cwd = Path.cwd().resolve()
+    if resolved in protected or resolved == cwd or resolved in cwd.parents:
+        raise OutputError(f"{option} '{target}' is the root, the home or the current folder (or "
+                          f"holds it); --overwrite replaces the whole folder: choose a folder of "
+                          "its own")
+
+
 def _describe_target(option: str, target: Path) -> str:
     return f"{option} '{target}'"
 
@@ -168,6 +180,8 @@ def _locked_target(target: Path, option: str, overwrite: bool, want_dir: bool):
                               f"abu run ({lock.holder()}); wait for it to finish or choose "
                               f"another {option}")
         clean_stale(target)
+        if target.exists() and overwrite and target.is_dir():
+            _check_replaceable(target, option)
         if target.exists() and not overwrite:
             has_content = target.is_file() or any(target.iterdir())
             if has_content:

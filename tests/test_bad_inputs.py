@@ -409,3 +409,17 @@ def test_negative_values_in_both_spellings_reach_the_option(capsys):
     assert parser.parse_args(["simulate", "--m", "-inf"]).m == -np.inf
     assert parser.parse_args(["simulate", "--beta0", "-.5"]).beta0 == -0.5
     assert parser.parse_args(["table41", "--mu", "-1", "-2e-3"]).mu == [-1.0, -2e-3]
+
+
+def test_overwrite_never_replaces_the_current_folder_or_above(tmp_path, monkeypatch, capsys):
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    (work / "keep.txt").write_text("user's file")
+    monkeypatch.chdir(work)
+    for out in (".", str(work), str(tmp_path / "a")):
+        assert main(["simulate", "--out", out, "--overwrite", "--te", "-1"]) == 2  # bad --te
+        assert main(["simulate", "--out", out, "--overwrite"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 2 and "current folder" in err[-1]
+    assert (work / "keep.txt").read_text() == "user's file"
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b", "keep.txt"]
