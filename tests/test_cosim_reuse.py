@@ -13,8 +13,9 @@ import pytest
 
 from abu_model.params import BallParams, PlantParams
 from harness import reuse
-from harness.experiments import StaircaseExperiment, run_staircase
+from harness.experiments import RampExperiment, StaircaseExperiment, run_staircase
 from harness.master import CoSimulation, CoSimulationError
+from harness.system import Source
 
 HZ = 2.0 * math.pi
 #: One 1 Hz step at t0 = 0.02 s from -12 Hz, 0.1 s simulated: about 15 communication steps.
@@ -88,15 +89,21 @@ def test_modules_of_the_master_stay_small():
 
 
 def test_a_failed_run_is_not_pooled_and_the_next_one_works(fmu_dir):
-    good = _experiment(2e-3).system(fmu_dir)
-    expected = reuse.run_system(good, -0.03, 0.1).values["omega"]
-    plant = good.component("plant")
-    bad_plant = replace(plant, parameters={**plant.parameters, "mu": -1.0})
-    bad = replace(good, components=tuple(bad_plant if c.name == "plant" else c
-                                         for c in good.components))
+    # The ramp's torque sources; a source that fails mid-run stands for any failure.
+    ramp = RampExperiment(PlantParams(), -20 * HZ, 3000.0, 0.1)
+    good = ramp.system(fmu_dir)
+    expected = reuse.run_system(good, 0.0, 0.1).values["omega"]
+
+    def broken(t: float) -> float:
+        if t > 0.02:
+            raise RuntimeError("source failure requested")
+        return 0.0
+
+    bad = replace(good, sources=(Source("plant.torque", broken), good.sources[1]))
+    assert bad.structure_key() == good.structure_key()  # so the pooled instances are taken
     before = reuse.pooled()
-    with pytest.raises(CoSimulationError, match="mu"):
-        reuse.run_system(bad, -0.03, 0.1)
+    with pytest.raises(RuntimeError, match="source failure"):
+        reuse.run_system(bad, 0.0, 0.1)
     assert reuse.pooled() == before - 1  # the failed co-simulation was freed, not pooled
-    again = reuse.run_system(good, -0.03, 0.1).values["omega"]
+    again = reuse.run_system(good, 0.0, 0.1).values["omega"]
     assert list(again) == list(expected)
