@@ -15,10 +15,8 @@ A multi-page TIFF or ``.npy`` stack of 3072 frames of 256x256 reads in well unde
 """
 from __future__ import annotations
 
-import logging
 import os
 import re
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +24,9 @@ import numpy as np
 
 from abu_model.atomic_io import atomic_open
 from abu_model.errors import AbuError
+
+from .recording_checks import (MAX_FRAMES, MAX_PIXELS, check_size, check_tiff_complete,  # noqa: F401
+                               tifffile_messages)
 
 #: File name endings read as single frames in a folder.
 FRAME_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
@@ -95,23 +96,6 @@ def check_stack(frames: np.ndarray, where: str) -> np.ndarray:
     return frames
 
 
-#: Limits of a recording held in memory (the report's camera stores 3072 frames per run).
-MAX_FRAMES = 200_000
-MAX_PIXELS = 4 * 2**30  # 4 GiB of 8-bit pixels
-
-
-def check_size(shape: tuple[int, ...], where: str) -> None:
-    """Refuse a recording whose frame count or pixel count is beyond what is held in memory."""
-    n = int(shape[0]) if len(shape) == 3 else 1
-    pixels = int(np.prod([int(s) for s in shape], dtype=np.float64))
-    if n > MAX_FRAMES:
-        raise RecordingError(f"{where}: {n} frames; at most {MAX_FRAMES} are read (the report's "
-                             "camera stores 3072 per run)")
-    if pixels > MAX_PIXELS:
-        raise RecordingError(f"{where}: {pixels / 2**30:.1f} GiB of pixels {tuple(shape)}; at "
-                             f"most {MAX_PIXELS / 2**30:.0f} GiB are held in memory")
-
-
 def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
     """Read a recording (folder of frames, multi-page TIFF, ``.npy`` stack or video).
 
@@ -167,11 +151,11 @@ def _read_tiff(p: Path) -> Recording:
 
     n_pages = None  # known once the structure is checked
     try:
-        with _tifffile_messages() as messages, tifffile.TiffFile(p) as tif:
+        with tifffile_messages() as messages, tifffile.TiffFile(p) as tif:
             pages = tif.pages
             if len(pages) == 0:
                 raise RecordingError(f"TIFF '{p}' holds no frames")
-            _check_tiff_complete(p, tif, messages)
+            check_tiff_complete(p, tif, messages)
             n_pages = len(pages)
             series = tif.series
             if len(series) > 1:
@@ -195,101 +179,6 @@ def _read_tiff(p: Path) -> Recording:
                 from None
     frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
     return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}")
-
-
-@contextmanager
-def _tifffile_messages():
-    """Collect tifffile's log messages (it logs a broken page chain instead of raising)."""
-    logger = logging.getLogger("tifffile")
-    messages: list[str] = []
-
-    class _Collect(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            messages.append(record.getMessage())
-
-    handler = _Collect(logging.WARNING)
-    old_propagate = logger.propagate
-    logger.addHandler(handler)
-    logger.propagate = False
-    try:
-        yield messages
-    finally:
-        logger.removeHandler(handler)
-        logger.propagate = old_propagate
-
-
-#: Unreferenced bytes tolerated at the end of a TIFF (tifffile pads 16 bytes).
-TIFF_TAIL_SLACK = 64
-
-
-def _check_tiff_complete(p: Path, tif, messages: list[str]) -> None:
-    """Refuse a truncated or damaged multi-page TIFF instead of measuring the pages left.
-
-    Three independent checks: tifffile found a page offset past the end of the file (a cut
-    page chain); the frame count the writer put in the header (tifffile's shaped metadata)
-    differs from the pages present; a page's pixel data extends past the end of the file.
-    """
-    size = p.stat().st_size
-    n_pages = len(tif.pages)
-    broken = [m for m in messages if "offset" in m.lower() or "corrupt" in m.lower()
-              or "invalid" in m.lower()]
-    if broken:
-        raise RecordingError(f"TIFF '{p}' is truncated or damaged: after page {n_pages - 1} the "
-                             f"page chain points outside the file ({size} bytes): "
-                             f"{' '.join(broken[0].split())}")
-    shaped = tif.shaped_metadata
-    if shaped and len(shaped) == 1 and isinstance(shaped[0], dict) and "shape" in shaped[0]:
-        shape = tuple(int(s) for s in shaped[0]["shape"])
-        check_size(shape, f"TIFF '{p}'")
-        page_size = max(1, int(np.prod(tif.pages[0].shape)))
-        expected = max(1, int(np.prod(shape)) // page_size)
-        contiguous = n_pages == 1 and expected > 1
-        stored = tif.pages[0].dataoffsets[0] + expected * tif.pages[0].databytecounts[0] \
-            if contiguous and tif.pages[0].dataoffsets else None
-        if contiguous and stored is not None and stored > size:
-            raise RecordingError(f"TIFF '{p}' is truncated: its header says {expected} frames "
-                                 f"{shape[-1]}x{shape[-2]} px ({stored} bytes), the file has "
-                                 f"{size} bytes")
-        if not contiguous and n_pages != expected:
-            raise RecordingError(f"TIFF '{p}': its header says {expected} frames, the file holds "
-                                 f"{n_pages} pages")
-    check_size((n_pages,) + tuple(tif.pages[0].shape[-2:]), f"TIFF '{p}'")
-    ifd_ends = _ifd_ends(p, tif)
-    referenced = max(ifd_ends)
-    for i, page in enumerate(tif.pages):
-        if ifd_ends[i] > size:
-            raise RecordingError(f"TIFF '{p}' is truncated: the header of frame {i} ends at byte "
-                                 f"{ifd_ends[i]}, the file has {size} bytes")
-        ends = [o + c for o, c in zip(page.dataoffsets, page.databytecounts)]
-        if ends and max(ends) > size:
-            raise RecordingError(f"TIFF '{p}' is truncated: the data of frame {i} ends at byte "
-                                 f"{max(ends)}, the file has {size} bytes")
-        tag_ends = [t.valueoffset + t.valuebytecount for t in page.tags.values()]
-        referenced = max([referenced, *ends, *tag_ends])
-    if size - referenced > TIFF_TAIL_SLACK:
-        # A page chain cut short (a damaged next-page offset) leaves frames nobody refers to.
-        raise RecordingError(f"TIFF '{p}' is damaged: {size - referenced} bytes after the last "
-                             f"of its {n_pages} frames belong to no frame (frames lost from the "
-                             "page chain?)")
-
-
-def _ifd_ends(p: Path, tif) -> list[int]:
-    """Byte just past each page's header (IFD: tag count, tags, next-IFD offset)."""
-    import struct
-
-    t = tif.tiff
-    count_fmt = t.byteorder + ("Q" if t.tagnosize == 8 else "H")
-    ends = []
-    with open(p, "rb") as handle:
-        for page in tif.pages:
-            handle.seek(page.offset)
-            raw = handle.read(t.tagnosize)
-            if len(raw) < t.tagnosize:
-                ends.append(page.offset + t.tagnosize)
-                continue
-            (count,) = struct.unpack(count_fmt, raw)
-            ends.append(page.offset + t.tagnosize + count * t.tagsize + t.offsetsize)
-    return ends
 
 
 def _raise_differing_pages(p: Path, tif) -> None:
