@@ -154,6 +154,7 @@ def make_callbacks(instances: dict[str, Instance]) -> tuple[fmi2CallbackFunction
         try:
             name = instance_name.decode("utf-8", "replace") if instance_name else ""
             text = message.decode("utf-8", "replace") if message else ""
+            text = text.replace("%%", "%")  # the message is a printf format (see below)
             label = STATUS[status] if 0 <= status < len(STATUS) else str(status)
             inst = instances.get(name)
             if inst is not None:
@@ -166,11 +167,12 @@ def make_callbacks(instances: dict[str, Instance]) -> tuple[fmi2CallbackFunction
     callbacks.logger = logger_ref
     callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    try:  # formats the variadic message arguments in C
-        from fmpy.logging import addLoggerProxy
-        addLoggerProxy(ctypes.byref(callbacks))
-    except Exception:  # pragma: no cover - missing platform library
-        pass
+    # No fmpy.logging.addLoggerProxy: its C proxy keeps ONE process-wide logger (the last one
+    # registered, by any fmpy user), so a pooled co-simulation's FMU logged through the freed
+    # logger of a later, closed one (segfault in fmi2ExitInitializationMode on a reused
+    # instance). The toolkit's FMUs pass the message as a format string without arguments
+    # ('%' escaped), so a plain callback loses nothing; another FMU's printf arguments would
+    # show unformatted.
     return callbacks, logger_ref
 
 

@@ -8,8 +8,9 @@ get/set of random value references of every type, also unknown ones, wrong types
 arrays' worth of values, non-finite values, doStep at the right, wrong, NaN and infinite time
 with zero, negative, NaN and infinite steps, get/set/free/serialize of FMU states, garbage,
 truncated, mutated and NaN-carrying serialized states, unknown state pointers, status queries,
-debug logging, and an injected failure of the Python runtime that makes the C layer latch
-fmi2Fatal). Asserted: no child dies of a signal or exits abnormally; every status is a valid
+debug logging, re-initialisations (reset, setup, enter, exit in a row) after a parameter
+set to -1 (refused at fmi2ExitInitializationMode) or back to its start value, and an
+injected failure of the Python runtime that makes the C layer latch fmi2Fatal). Asserted: no child dies of a signal or exits abnormally; every status is a valid
 fmi2Status; every non-OK status comes with a logged message; after fmi2Fatal every call
 returns fmi2Error (with a message) and fmi2FreeFMUstate / fmi2FreeInstance still free.
 """
@@ -67,6 +68,9 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
     by_type = {kind: [v.valueReference for v in variables if v.type == kind]
                for kind in ("Real", "Integer", "Boolean", "String")}
     all_vrs = [v.valueReference for v in variables]
+    reals = [v for v in variables if v.type == "Real" and v.causality == "parameter"
+             and v.start is not None]
+    parameters = [v.valueReference for v in reals] or by_type["Real"]
     states, blobs, counts = [], [], Counter()
     fatal = False
     values = [0.0, 1e-3, -1.0, 2.5e-3, 1e300, -1e-300, math.nan, math.inf, -math.inf]
@@ -174,13 +178,22 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
         ("getRealStatus", 1, lambda: fmu.getRealStatus(rng.randrange(5))),
         ("getBooleanStatus", 1, lambda: fmu.getBooleanStatus(rng.randrange(5))),
         ("injectFault", 0.3, inject_fault),
+        ("badParameter", 1, lambda: fmu.setReal([rng.choice(parameters)], [-1.0])),
+        ("goodParameters", 1, lambda: fmu.setReal([v.valueReference for v in reals],
+                                                   [float(v.start) for v in reals])),
     ]
+    # A re-initialisation: reset, setup, enter and exit initialization mode in a row (after a
+    # refused bad parameter, an error or a fatal error alike), each call checked on its own.
+    cycle = ["reset", "setupExperiment", "enterInitializationMode", "exitInitializationMode"]
     names = [a[0] for a in actions]
     weights = [a[1] for a in actions]
     table = {a[0]: a[2] for a in actions}
+    names.append("reinitialize")
+    weights.append(2)
     for _ in range(rng.randint(5, 40)):
         name = rng.choices(names, weights)[0]
-        call(name, table[name])
+        for step in (cycle if name == "reinitialize" else [name]):
+            call(step, table[step])
     fmu.fmi2FreeInstance(fmu.component)  # freeing always frees (also after fmi2Fatal)
     return {"counts": dict(counts), "fatal": fatal}
 

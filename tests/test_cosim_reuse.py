@@ -107,3 +107,20 @@ def test_a_failed_run_is_not_pooled_and_the_next_one_works(fmu_dir):
     assert reuse.pooled() == before - 1  # the failed co-simulation was freed, not pooled
     again = reuse.run_system(good, 0.0, 0.1).values["omega"]
     assert list(again) == list(expected)
+
+
+def test_a_failing_parameter_on_pooled_instances_is_an_error_and_the_next_run_works(fmu_dir):
+    # mu = -1 fails fmi2ExitInitializationMode of the reused AbuBall (fmi2Error, a message).
+    good = _experiment(2e-3).system(fmu_dir)
+    expected = reuse.run_system(good, -0.03, 0.1).values["omega"]
+    reuse.run_system(good, -0.03, 0.1, reuse=False)  # another co-simulation loaded and freed
+    plant = good.component("plant")
+    bad_plant = replace(plant, parameters={**plant.parameters, "mu": -1.0})
+    bad = replace(good, components=tuple(bad_plant if c.name == "plant" else c
+                                         for c in good.components))
+    before = reuse.pooled()
+    with pytest.raises(CoSimulationError, match="'mu' = -1"):
+        reuse.run_system(bad, -0.03, 0.1)
+    assert reuse.pooled() == before - 1
+    again = reuse.run_system(good, -0.03, 0.1).values["omega"]
+    assert list(again) == list(expected)
