@@ -270,9 +270,18 @@ def _fmt(v: float | None, spec: str = ".4g") -> str:
 
 
 def _describe(s: dict) -> str:
-    lines = [f"mu in [{_fmt(s['mu_low'])}, {_fmt(s['mu_high'])}]  ({s['status']})",
-             f"  t_slip_low = {_fmt(s['t_slip_low'], '.4f')} s (last surely stuck), "
-             f"t_slip_high = {_fmt(s['t_slip_high'], '.4f')} s (first surely slipping)"]
+    conf = s.get("confidence")
+    lines = [f"mu in [{_fmt(s['mu_low'])}, {_fmt(s['mu_high'])}]  ({s['status']})"
+             + (f", {100 * conf:g} % confidence" if conf is not None else "")]
+    mf, rm = s.get("model_fit"), s.get("running_max")
+    if mf and rm:
+        lines.append(f"  ball-model fit of beta: [{_fmt(mf['mu_low'])}, {_fmt(mf['mu_high'])}] "
+                     f"({mf['status']}), slip onset {_fmt(mf['t_slip'], '.4f')} s; mu_d = "
+                     f"{_fmt(s.get('mu_d'))} in [{_fmt(s.get('mu_d_low'))}, "
+                     f"{_fmt(s.get('mu_d_high'))}]; report's running max: "
+                     f"[{_fmt(rm['mu_low'])}, {_fmt(rm['mu_high'])}]")
+    lines.append(f"  t_slip_low = {_fmt(s['t_slip_low'], '.4f')} s (last surely stuck), "
+                 f"t_slip_high = {_fmt(s['t_slip_high'], '.4f')} s (first surely slipping)")
     if s.get("relative_width") is not None:
         lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
     ea = s["error_analysis"]
