@@ -159,19 +159,31 @@ def _error_norm(err: Vector, y0: Vector, y1: Vector, rtol: float, atol: Sequence
 def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector, t_end: float,
                     rtol: float, atol: Sequence[float],
                     event: Callable[[float, Vector], float] | None = None,
-                    max_steps: int = 100000) -> tuple[float, Vector, bool]:
+                    max_steps: int = 100000,
+                    event_slope: Callable[[float, Vector, Vector], float] | None = None,
+                    ) -> tuple[float, Vector, bool]:
     """Integrate y' = f(t, y) from t0 to t_end, stopping where ``event`` falls to <= 0.
 
     Only a fall from > 0 counts (like an event of direction -1): an event that starts at 0,
-    e.g. beta' = 0 at the start of a slip, fires once it has become positive. Returns (t, y, stopped): the event time and state if it
-    fell, else t_end and y(t_end). The event time is located by re-stepping from the last
-    accepted point with the step as the unknown (a bracketing root finder on one RK step),
-    so it is as accurate as the steps themselves.
+    e.g. beta' = 0 at the start of a slip, fires once it has become positive. Returns
+    (t, y, stopped): the event time and state if it fell, else t_end and y(t_end). The event
+    time is located by re-stepping from the last accepted point with the step as the unknown
+    (a bracketing root finder on one RK step), so it is as accurate as the steps themselves.
+
+    ``event_slope(t, y, y')`` is d(event)/dt. An event that starts at 0 with a positive slope
+    rises first, so a first step that ends at or below 0 holds the whole excursion above 0
+    (a slip shorter than the step) and would step over it: such a step is shrunk (to the peak
+    of the quadratic through g(t0) = 0, its slope and g(t0 + h), at most half the step) until
+    it ends above 0; the fall is then bracketed by the next step as usual.
     """
     t, y = t0, list(y0)
     k = f(t, y)
     h = t_end - t0
     g_prev = event(t, y) if event is not None else 0.0
+    # Slope of an event that starts at 0 and rises (else None: nothing to guard).
+    rising = event_slope(t, y, k) if event is not None and g_prev == 0.0 and event_slope else None
+    if rising is not None and not rising > 0.0:
+        rising = None
     for _ in range(max_steps):
         if t >= t_end:
             return t_end, y, False
@@ -189,6 +201,12 @@ def integrate_until(f: Callable[[float, Vector], Vector], t0: float, y0: Vector,
                 raise ArithmeticError(f"step size underflow at t = {t!r}")
             continue
         g_new = event(t + h, y_new) if event is not None else 0.0
+        if rising is not None:
+            if g_new <= 0.0 and h > 64.0 * math.ulp(max(abs(t), 1.0)):
+                curvature = (g_new - rising * h) / (h * h)  # < 0: g ~ rising u + curvature u^2
+                h = min(0.5 * h, -0.5 * rising / curvature)
+                continue
+            rising = None  # the event is above 0 at the end of this step: ordinary from here
         if event is not None and g_prev > 0.0 and g_new <= 0.0:
             def g(step: float) -> float:
                 return event(t + step, rk45_step(f, t, y, step, k)[0])

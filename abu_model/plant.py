@@ -313,7 +313,8 @@ class AbuPlant:
         scale_torque = max(abs(torque), abs(rate) * h, abs(accel) * h * h, 1e-12)
         atol = (1e-14, 1e-12, 1e-14, 1e-12, 1e-13 * scale_torque)
         try:
-            tau, y, stopped = integrate_until(rhs, tau0, y0, h, SLIP_RTOL, atol, stops)
+            tau, y, stopped = integrate_until(rhs, tau0, y0, h, SLIP_RTOL, atol, stops,
+                                              event_slope=lambda tau, y, dy: direction * dy[3])
             if not stopped and stops(h, y) > 0.0:  # a stop within END_TOLERANCE after h
                 y_late = rk45_step(rhs, h, y, END_TOLERANCE)[0]
                 stopped = stops(h + END_TOLERANCE, y_late) <= 0.0

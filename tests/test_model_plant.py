@@ -3,11 +3,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from abu_model.params import BallParams, PlantParams
 from abu_model.plant import AbuPlant, Mode
-from abu_model.reference import simulate_ramp_reference
+from abu_model.reference import _simulate, simulate_ramp_reference
 
 HZ = 2 * math.pi
 
@@ -164,3 +166,71 @@ def test_second_order_hold_equals_the_same_quadratic_in_sub_steps(tau_motor, rea
     for name in ("theta", "omega", "beta", "beta_dot", "torque_applied"):
         assert getattr(whole.state, name) == pytest.approx(getattr(parts.state, name),
                                                            rel=1e-9, abs=1e-12)
+
+
+# -- short slips near the stick limit, stepped at coarse steps --------------------------------
+class _FallingTorque:
+    """Commanded torque T1 (1 - rate t) [N m] (one segment) for the monolithic reference."""
+
+    def __init__(self, T1: float, rate: float):
+        self.T1, self.rate = T1, rate
+
+    def segment(self, t):
+        return self
+
+    def torque(self, t, y):
+        return self.T1 * (1.0 - self.rate * t)
+
+    def integral_rate(self, t, y):
+        return 0.0
+
+
+SHORT_SLIPS: dict = {"cases": 0, "shortest_s": math.inf, "worst_s": 0.0, "restuck": 0}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _print_short_slip_figures():
+    yield
+    if SHORT_SLIPS["cases"]:
+        print(f"\n[plant] {SHORT_SLIPS['cases']} slips at a torque step beyond the stick limit "
+              f"(margin 1 - 1e-2 .. 1 - 1e-6; mu 1e-3..3e-2; |omega0| 30..150 rad/s; torque "
+              f"falling so the slip lasts {SHORT_SLIPS['shortest_s']:.1e} s .. one step) at "
+              f"1, 20 and 50 ms steps: {SHORT_SLIPS['restuck']} re-stick inside a step, the same "
+              f"switches as the SciPy reference, every switch within "
+              f"{SHORT_SLIPS['worst_s']:.1e} s")
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(mu=st.floats(1e-3, 3e-2), omega0=st.floats(30.0, 150.0), sign=st.sampled_from([-1.0, 1.0]),
+       torque_sign=st.sampled_from([-1.0, 1.0]), exponent=st.floats(2.0, 6.0),
+       spread=st.floats(0.0, 1.0), h=st.sampled_from([1e-3, 20e-3, 50e-3]))
+def test_short_slips_near_the_margin_are_not_stepped_over(mu, omega0, sign, torque_sign,
+                                                          exponent, spread, h):
+    """A torque step just beyond the stick limit (omega0 = margin x the slip speed) that then
+    falls: the slip lasts from ~2 (1/margin - 1)/rate, down to microseconds, to about one
+    step. The plant stepped at h must see the slip and the re-stick where the monolithic
+    reference (SciPy DOP853 with events) does."""
+    params = PlantParams(ball=BallParams(mu=mu))
+    margin = 1.0 - 10.0 ** -exponent
+    w0 = sign * omega0
+    T1 = torque_sign * params.J_total * mu * w0 * w0 / (params.ball.lever_ratio * margin)
+    excess = 1.0 / margin - 1.0
+    lo, hi = 2.0 * excess / h, 0.5 / h  # slip of about one step .. torque halved at 2 h
+    rate = lo * (hi / lo) ** spread
+    t_end = 2.0 * h
+    plant = AbuPlant(params, omega0=w0)
+    switches = []
+    for i in range(2):
+        switches += plant.advance(h, T1 * (1.0 - rate * i * h), -T1 * rate)
+    y0 = np.array([0.0, w0, 0.0, 0.0, 0.0, 0.0])
+    ref = _simulate(params, _FallingTorque(T1, rate), [], 0.0, t_end, y0, 0.01)
+    assert [(s.from_mode, s.to_mode) for s in switches] == \
+        [(s.from_mode, s.to_mode) for s in ref.switches]
+    assert switches[0].time == 0.0 and switches[0].from_mode == Mode.STICK
+    for ours, theirs in zip(switches, ref.switches):
+        assert abs(ours.time - theirs.time) <= 1e-9, (ours, theirs)
+        SHORT_SLIPS["worst_s"] = max(SHORT_SLIPS["worst_s"], abs(ours.time - theirs.time))
+    SHORT_SLIPS["cases"] += 1
+    if len(switches) >= 2:
+        SHORT_SLIPS["restuck"] += switches[1].time < h
+        SHORT_SLIPS["shortest_s"] = min(SHORT_SLIPS["shortest_s"], switches[1].time)
