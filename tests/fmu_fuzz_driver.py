@@ -10,9 +10,10 @@ with zero, negative, NaN and infinite steps, get/set/free/serialize of FMU state
 truncated, mutated and NaN-carrying serialized states, unknown state pointers, status queries,
 debug logging, re-initialisations (reset, setup, enter, exit in a row) after a parameter
 set to -1 (refused at fmi2ExitInitializationMode) or back to its start value, and an
-injected failure of the Python runtime that makes the C layer latch fmi2Fatal). Asserted: no child dies of a signal or exits abnormally; every status is a valid
-fmi2Status; every non-OK status comes with a logged message; after fmi2Fatal every call
-returns fmi2Error (with a message) and fmi2FreeFMUstate / fmi2FreeInstance still free.
+injected failure of the Python runtime that makes the C layer latch fmi2Fatal). Asserted:
+no child dies of a signal or exits abnormally; every status is a valid fmi2Status; every
+non-OK status comes with a logged message; after fmi2Fatal every call returns fmi2Error
+(with a message) and fmi2FreeFMUstate / fmi2FreeInstance still free.
 """
 from __future__ import annotations
 
