@@ -30,6 +30,11 @@ if TYPE_CHECKING:
 
 #: A proposal within this fraction of h before an event or the stop time is moved onto it.
 STRETCH = 0.2
+#: Tolerance factor on the approach to a switch found inside a step. An FMU locates such a
+#: switch from the inputs held over the step (e.g. a slip that starts from a continuous
+#: acceleration: mu_req(t) = mu with the held torque), so the steps from the rollback to the
+#: switch run at tol * SWITCH_TIGHTEN; only these few steps get finer.
+SWITCH_TIGHTEN = 1e-4
 
 
 class Runner:
@@ -42,6 +47,9 @@ class Runner:
         self.rec = Recorder(sim.plan.probes)
         self.stats: dict[str, Any] = {"steps": 0, "rollbacks": 0, "rejected": 0,
                                       "do_steps": 0, "max_error": 0.0}
+        # While approaching a switch found inside a step: the time after which the tight
+        # tolerance ends if no switch was landed on (the switch moved away) [s].
+        self.approach_until: float | None = None
 
     def _propose(self, t: float, n_grid: int, h: float) -> tuple[float, int]:
         sim = self.sim
@@ -112,6 +120,8 @@ class Runner:
                     tries += 1
                     # Land on the first inner switch; halve when an FMU cannot say where.
                     h = min([ts - t for ts in inner] + ([h / 2.0] if crowded else []))
+                    if control is not None and self.approach_until is None:
+                        self.approach_until = t + 2.0 * h
                     continue
                 if inner or crowded:
                     rec.notes.append(f"step from t = {t:.12g} s: switches not separated after "
@@ -121,6 +131,8 @@ class Runner:
                 held = owners if at_event else frozenset()
                 left = sim._sweep(t_new, pre, held, commit=False)
                 err = control.error(snap, left, h) if control else 0.0
+                if self.approach_until is not None:
+                    err /= SWITCH_TIGHTEN
                 if err > 1.0 and h > control.h_min and tries < sim.max_rollbacks:
                     sim.restore_states(states, inputs=True)
                     stats["rollbacks"] += 1
@@ -140,6 +152,8 @@ class Runner:
         rec.switches.extend(new_switches)
         at_switch = any(s.located and abs(s.time - t_new) <= sim.switch_tol
                         for s in new_switches)
+        if self.approach_until is not None and (at_switch or t_new >= self.approach_until):
+            self.approach_until = None
         if at_event and event_at_stop:
             rec.record(t_new, -1, left)  # held sweep: nothing to commit
             rec.notes.append(f"the time event at the stop time {t_new:.12g} s is not taken: "

@@ -114,8 +114,13 @@ def inner_switches(t: float, h: float, before: list[SwitchInfo], after: list[Swi
             elif inside(t_first):
                 inner.append(t_first)
             elif abs(t_first - t) <= tol and n == 2:
-                if inside(t_last):  # one at the start, the other inside
-                    inner.append(t_last)
+                # One at the start (inputs that jumped at a time event), the other later:
+                # landing on the later one would leave no point in between, so the mode
+                # after the first switch would never be observed (a slip at a setpoint step
+                # that ends within the step read as stick -> stick). Land in between first;
+                # the next step then lands on the later switch as a single one.
+                if t_last > t + tol:
+                    inner.append(t + 0.5 * (t_last - t))
             elif t_first < t + h - tol:
                 crowded = True  # the first at the start, more than one after it
     return inner, crowded

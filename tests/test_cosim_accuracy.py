@@ -1,19 +1,22 @@
 """Error-controlled co-simulation against the monolithic SciPy reference (an independent
 solver of the same closed loop, no FMI), and the two ways the bounds used to overclaim.
 
-Family of the property test (printed with ``pytest -s``): mu in [1e-3, 3e-2]; |omega0| from
-0.7 to 0.99 or 1.01 to 1.6 times the speed at which the first setpoint step makes the ball
-slip (so about a third of the cases slip at the first step); 1 to 6 steps of 1 Hz up or down; te in
-[0.3, 1.5] s; every rounding and both theta_ref readings; the end time either on a setpoint
-step (not the first) or 0.5 s after the staircase.
+Family of the property test (printed with ``pytest -s``): mu in [1e-3, 6e-2]; |omega0| from
+0.7 to 1.6 (also 1 - 1e-2 to 1 - 1e-6) times the speed at which the first setpoint step
+makes the ball slip (so about a third of the cases slip at the first step); 1 to 40 steps
+of 1 Hz up or down in te from 0.02 to 1.5 s (setpoint steps down to a few 0.1 ms apart);
+t0 from 0 to 0.5 s; every
+rounding and both theta_ref readings; no motor lag or tau_motor 2 ms or 10 ms; the end time
+either on a setpoint step (not the first) or 0.5 s after the staircase.
 """
 from __future__ import annotations
 
 import json
 import math
 
+import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 
 from abu_model.params import BallParams, PlantParams
@@ -24,7 +27,8 @@ from harness.experiments import StaircaseExperiment, run_staircase
 HZ = 2.0 * math.pi
 REPORT = dict(omega0=-17 * HZ, omega_end=-22 * HZ, t0=0.0, te=1.0)
 WORST: dict[str, float] = {"mu_rel": 0.0, "t_slip_s": 0.0, "switch_s": 0.0, "cases": 0,
-                           "first_step_slips": 0, "end_on_step": 0, "steps": 0}
+                           "first_step_slips": 0, "end_on_step": 0, "steps": 0,
+                           "inner_slips": 0, "slips": 0, "switches": 0, "mu_rel_lag": 0.0}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -33,8 +37,11 @@ def _print_family_figures():
     yield
     if WORST["cases"]:
         print(f"\n[accuracy] {WORST['cases']} random staircases at the default tolerance "
-              f"({WORST['first_step_slips']} first-step slips, {WORST['end_on_step']} ending on "
-              f"a step): bounds within {WORST['mu_rel']:.1e} relative, slip instants within "
+              f"({WORST['slips']} slip, {WORST['first_step_slips']} at the first step, "
+              f"{WORST['inner_slips']} from a continuous acceleration; {WORST['end_on_step']} "
+              f"ending on a step; {WORST['switches']} switches): bounds within "
+              f"{WORST['mu_rel']:.1e} relative (peaks of mu_req between steps, sampled "
+              f"at each solver's points: {WORST['mu_rel_lag']:.1e}), slip instants at setpoint steps within "
               f"{WORST['t_slip_s']:.1e} s, every switch within {WORST['switch_s']:.1e} s of the "
               f"reference; at most {WORST['steps']} communication steps")
 
@@ -48,34 +55,52 @@ def _rel(a: float, b: float) -> float:
     return abs(a / b - 1.0)
 
 
-@settings(max_examples=30, deadline=None, derandomize=True,
+@settings(max_examples=200, deadline=None, derandomize=True,
           phases=(Phase.explicit, Phase.generate),
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-# margin within 1 % of 1 is left out: there a first-step slip can last only some 10 us, and
-# the plant's slip integration (abu_model.plant, not the master) can step over the whole
-# excursion of beta' when its first Runge-Kutta step spans it, missing the re-stick (e.g.
-# mu = 4.0537e-3, margin = 0.99999, thesis, trail, 6 steps, te = 0.5411 s: the reference and a
-# 0.1 ms fixed step re-stick after 34 us, a 1 ms step does not). Reported to the plant's owner.
-@given(mu=st.floats(1e-3, 3e-2), margin=st.one_of(st.floats(0.7, 0.99), st.floats(1.01, 1.6)),
-       n_steps=st.integers(1, 6),
-       te=st.floats(0.3, 1.5), rounding=st.sampled_from(["lead", "nearest", "trail"]),
+# margins near 1 included (0.7..1.6 and 1 - 1e-2..1e-6): there a first-step slip can last
+# only some 10 us, which the plant used to step over (fixed in abu_model.numerics; e.g.
+# mu = 4.0537e-3, margin = 0.99999, thesis, trail, 6 steps, te = 0.5411 s re-sticks after 34 us).
+@example(mu=0.01501511335634862, margin=None, n_steps=29, te=0.25927026670707437,
+         rounding="lead", mode="integral", sign=-1.0, end_step=None, t0=0.234, tau_motor=0.0,
+         w0_hz=-18.0, t_end=0.41, k=0, up=True)  # a slip at a setpoint step that ended inside the step
+@given(mu=st.floats(1e-3, 6e-2),
+       margin=st.one_of(st.floats(0.7, 1.6), st.floats(2.0, 6.0).map(lambda e: 1 - 10**-e)),
+       n_steps=st.integers(1, 40), te=st.floats(0.02, 1.5),
+       rounding=st.sampled_from(["lead", "nearest", "trail"]),
        mode=st.sampled_from(["integral", "thesis"]), sign=st.sampled_from([-1.0, 1.0]),
-       end_step=st.sampled_from([None, 0, 1, 2, 3]))
+       end_step=st.sampled_from([None, 0, 1, 2, 3]), t0=st.floats(0.0, 0.5),
+       tau_motor=st.sampled_from([0.0, 0.002, 0.01]), w0_hz=st.just(None), t_end=st.just(None),
+       k=st.integers(0, 39), up=st.booleans())
 def test_default_tolerance_matches_reference_on_random_staircases(
-        fmu_dir, mu, margin, n_steps, te, rounding, mode, sign, end_step):
-    plant = PlantParams(BallParams(mu=mu))
-    probe = StaircaseExperiment(plant, sign, sign * (1 + n_steps * HZ), te=te, rounding=rounding)
-    t1 = probe.staircase.step_times[0]
-    jump = 2 * 0.5 * 2.2 * HZ + (2.2**2 * t1 * HZ if mode == "thesis" else 0.0)
-    w0 = sign * margin * math.sqrt(plant.ball.lever_ratio * jump / mu)
-    steps = StaircaseExperiment(plant, w0, w0 + sign * n_steps * HZ, te=te,
-                                rounding=rounding).staircase.step_times
-    # end on a setpoint step after the first (the first would leave no stick period at all)
-    t_end = (None if end_step is None or len(steps) < 2
-             else steps[1 + end_step % (len(steps) - 1)])
-    exp = StaircaseExperiment(plant, w0, w0 + sign * n_steps * HZ, te=te, rounding=rounding,
-                              theta_ref_mode=mode, t_end=t_end)
-    s = run_staircase(exp, fmu_dir).summary
+        fmu_dir, mu, margin, n_steps, te, rounding, mode, sign, end_step, t0, tau_motor, w0_hz,
+        t_end, k, up):
+    plant = PlantParams(BallParams(mu=mu), tau_motor=tau_motor)
+    direction = sign if up else -sign  # |omega| grows (up) or falls along the staircase
+    if w0_hz is None:
+        probe = StaircaseExperiment(plant, sign * (1 + n_steps * HZ), sign, t0=t0, te=te,
+                                    rounding=rounding)
+        # margin to the slip speed of setpoint step k (a single step from steady rotation;
+        # k = 0 when |omega| grows). Where |omega| falls the ball slips at or before step k
+        # (fast steps pile their responses up), at a random excess of mu_req over mu and
+        # often only briefly: a slip that starts and ends inside one communication step.
+        k = 0 if up else min(k, len(probe.staircase.step_times) - 1)
+        tk = probe.staircase.step_times[k]
+        jump = 2 * 0.5 * 2.2 * HZ + (2.2**2 * tk * HZ if mode == "thesis" else 0.0)
+        w0 = sign * (margin * math.sqrt(plant.ball.lever_ratio * jump / mu)
+                     + (0.0 if up else (k + 1) * HZ))
+        w0 = sign * max(abs(w0), (0.0 if up else n_steps * HZ) + HZ)
+        steps = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
+                                    rounding=rounding).staircase.step_times
+        # end on a setpoint step after the first (the first would leave no stick period)
+        t_end = (None if end_step is None or len(steps) < 2
+                 else steps[1 + end_step % (len(steps) - 1)])
+    else:
+        w0 = w0_hz * HZ
+    exp = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
+                              rounding=rounding, theta_ref_mode=mode, t_end=t_end)
+    res = run_staircase(exp, fmu_dir)
+    s = res.summary
     ref = _reference(exp)
     WORST["cases"] += 1
     WORST["steps"] = max(WORST["steps"], s["cosim"]["steps"])
@@ -85,16 +110,28 @@ def test_default_tolerance_matches_reference_on_random_staircases(
         assert s["mu_low"] is None and "no lower bound" in s["message"]
     else:
         assert s["mu_low"] is not None
-        WORST["mu_rel"] = max(WORST["mu_rel"], _rel(s["mu_low"], ref.mu_low))
-        assert s["mu_low"] == pytest.approx(ref.mu_low, rel=1e-6)
+        if tau_motor > 0.0 or not up:
+            # mu_req can peak between setpoint steps (a motor lag, or |omega| falling faster
+            # than |alpha|), not at a recorded limit: mu_low is then that peak as sampled by
+            # each solver's own points, a lower bound in both (and below mu, asserted).
+            WORST["mu_rel_lag"] = max(WORST["mu_rel_lag"], _rel(s["mu_low"], ref.mu_low))
+            assert s["mu_low"] == pytest.approx(ref.mu_low, rel=1e-2)
+        else:
+            WORST["mu_rel"] = max(WORST["mu_rel"], _rel(s["mu_low"], ref.mu_low))
+            assert s["mu_low"] == pytest.approx(ref.mu_low, rel=1e-6)
         assert s["mu_low"] <= mu * (1 + 1e-9)  # never above the true mu
     if ref.t_slip is None:
         assert s["t_slip"] is None and s["mu_high"] is None
         if s["end_on_setpoint_step"]:
             assert "never slips" not in s["message"] and "open" in s["message"]
         return
-    assert abs(s["t_slip"] - ref.t_slip) <= 1e-9
-    WORST["t_slip_s"] = max(WORST["t_slip_s"], abs(s["t_slip"] - ref.t_slip))
+    on_step = min(abs(np.asarray(exp.staircase.step_times) - ref.t_slip)) <= 1e-12
+    if on_step:  # a slip at a setpoint step: the master lands on the step exactly
+        assert abs(s["t_slip"] - ref.t_slip) <= 1e-9
+        WORST["t_slip_s"] = max(WORST["t_slip_s"], abs(s["t_slip"] - ref.t_slip))
+    else:  # from a continuous acceleration (motor lag): located inside a step, see below
+        WORST["inner_slips"] += 1
+        assert s["t_slip"] == pytest.approx(ref.t_slip, abs=1e-5)
     assert s["mu_high"] == pytest.approx(ref.mu_high, rel=1e-6)
     WORST["mu_rel"] = max(WORST["mu_rel"], _rel(s["mu_high"], ref.mu_high))
     assert mu <= s["mu_high"] * (1 + 1e-9)
@@ -102,6 +139,8 @@ def test_default_tolerance_matches_reference_on_random_staircases(
     # ending) are located by the plant from coupled inputs, to the coupling's accuracy.
     assert [(w["from_mode"], w["to_mode"]) for w in s["switches"]] == \
         [(w.from_mode, w.to_mode) for w in ref.switches]
+    WORST["slips"] += 1
+    WORST["switches"] += len(ref.switches)
     for ours, theirs in zip(s["switches"], ref.switches):
         WORST["switch_s"] = max(WORST["switch_s"], abs(ours["time_s"] - theirs.time))
         assert ours["time_s"] == pytest.approx(theirs.time, abs=1e-5)
