@@ -37,6 +37,8 @@ PRE_ROLL_S = 0.05
 #: Largest setpoint step [Hz] of table41 (the report's is 1 Hz).
 MAX_STEP_HZ = 100.0
 MIN_STEP_HZ = 1e-3
+#: Accepted range of the coupling tolerance --tol [-] (harness.stepping; default 1e-5).
+MIN_TOL, MAX_TOL = 1e-10, 1e-1
 #: Largest closed-loop damping ratio / natural frequency [-, rad/s] the loop check may meet.
 MAX_ZETA = 1000.0
 
@@ -51,7 +53,14 @@ def _speed(option: str, value_hz: float) -> float:
 
 def _comm_step(args: argparse.Namespace) -> float | None:
     """The fixed communication step, or None when the step is error-controlled (--tol)."""
-    if getattr(args, "tol", None) is not None:
+    tol = getattr(args, "tol", None)
+    if tol is not None:
+        positive("--tol", tol, "")
+        in_range("--tol", tol, MIN_TOL, MAX_TOL, "",
+                 f"a coupling tolerance: below {MIN_TOL:g} the steps near switches reach the "
+                 "resolution of the time axis (1e-11: 6 s, 1e-12: over 3 min, for bounds that "
+                 f"no longer change); above {MAX_TOL:g} the "
+                 "0.05 s step cap decides alone, the tolerance means nothing")
         return None
     value = getattr(args, "comm_step", None)
     if value is None:
