@@ -28,6 +28,7 @@ from harness.output_tx import check_not_inside, output_folder
 
 from .cli_checks import check_analysis_options, check_render_options, check_tracking_options
 from .input_checks import check_motion_and_roles, check_sampling
+from .json_text import dumps, json_ready  # noqa: F401  (json_ready: public name of this module)
 
 DEFAULT_FPS = 4500.0
 #: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
@@ -46,29 +47,6 @@ def _positive(name: str, value: float | None, unit: str) -> float | None:
     if not (math.isfinite(value) and value > 0):
         raise ParameterError(name, value, f"a finite number > 0 {unit}".rstrip())
     return float(value)
-
-
-def json_ready(obj: Any) -> Any:
-    """Replace non-finite floats by None and NumPy scalars/arrays by Python values."""
-    if isinstance(obj, dict):
-        return {str(k): json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_ready(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_ready(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
-def dumps(obj: Any) -> str:
-    """Strict JSON text (no NaN) of ``obj``."""
-    return json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n"
 
 
 def format_table_csv(table: dict[str, np.ndarray]) -> str:

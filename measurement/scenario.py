@@ -292,7 +292,9 @@ def scenario_meta(scn: Scenario, st: dict[str, np.ndarray], pos: dict[str, np.nd
     sw = st["switches"]
     first = sw[0] if sw.size else None
     stuck = (np.arange(scn.n_frames) < (slipping[0] if slipping.size else scn.n_frames))
+    from .twin import RENDER_META_KIND, RENDER_META_VERSION
     return {
+        "kind": RENDER_META_KIND, "format_version": RENDER_META_VERSION,
         "description": "harsh camera twin (measurement.scenario): drive simulated on "
                        "abu_model.plant.AbuPlant, physically lit and filmed",
         "files": {"frames": "frames.tif", "truth": "truth.csv"},
@@ -334,7 +336,7 @@ def scenario_meta(scn: Scenario, st: dict[str, np.ndarray], pos: dict[str, np.nd
 
 def render_scenario(out_dir: str | Path, scn: Scenario) -> Path:
     """Simulate and film ``scn``; write frames.tif, truth.csv, meta.json atomically."""
-    from .cli import dumps
+    from .json_text import dumps
     from .frames_io import write_multipage_tiff
 
     out = Path(out_dir)

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import json
 import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -39,8 +38,13 @@ from abu_model.errors import AbuError, ParameterError
 from abu_model.params import BallParams, PlantParams, check_finite, check_positive
 
 from .frames_io import write_multipage_tiff
+from .json_text import dumps
 from .markers import format_seeds
 from .render import CameraGeometry, RenderSettings, render_frames
+
+#: ``kind`` and ``format_version`` of a rendered recording's meta.json (twin and scenarios).
+RENDER_META_KIND = "abu-render-meta"
+RENDER_META_VERSION = 1
 
 TWO_PI = 2.0 * math.pi
 
@@ -216,23 +220,6 @@ def _truth_csv(times: np.ndarray, centre, cd, ball, apparent, st: dict[str, np.n
     return buf.getvalue()
 
 
-def _json_ready(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_ready(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _json_ready(obj.tolist())
-    if isinstance(obj, (float, np.floating)):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
 def simulate_twin(settings: TwinSettings | None = None, *, fmu_dir: Any = None):
     """Run the co-simulation and sample it at the frame times.
 
@@ -281,6 +268,7 @@ def render_twin(out_dir: str | Path, settings: TwinSettings | None = None, *,
     apparent = ball + s.render.ball_shift_vector
     summary = res.summary
     meta = {
+        "kind": RENDER_META_KIND, "format_version": RENDER_META_VERSION,
         "description": "digital twin of the report's experiment (sec. 5.3): FMI co-simulation "
                        "rendered by measurement.render",
         "files": {"frames": "frames.tif", "truth": "truth.csv"},
@@ -321,8 +309,7 @@ def render_twin(out_dir: str | Path, settings: TwinSettings | None = None, *,
     out.mkdir(parents=True, exist_ok=True)
     write_multipage_tiff(out / "frames.tif", frames)
     atomic_write_text(out / "truth.csv", _truth_csv(times, centre, cd, ball, apparent, state))
-    atomic_write_text(out / "meta.json", json.dumps(_json_ready(meta), indent=2,
-                                                    allow_nan=False) + "\n")
+    atomic_write_text(out / "meta.json", dumps(meta))
     return out
 
 
