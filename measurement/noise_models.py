@@ -90,7 +90,17 @@ class Gls:
 
     def whiten(self, a: np.ndarray) -> np.ndarray:
         if self.winv is not None:
-            return a @ self.winv.T
+            # winv is lower triangular: columns before a's first non-zero one stay 0 (model
+            # rows are 0 while the candidate ball sticks), so only the trailing block is used
+            nz = np.flatnonzero(np.any(a != 0.0, axis=0))
+            if nz.size == 0:
+                return np.zeros_like(a)
+            c = int(nz[0])
+            if c == 0:
+                return a @ self.winv.T
+            out = np.zeros_like(a)
+            out[:, c:] = a[:, c:] @ self.winv[c:, c:].T
+            return out
         if self.rho == 0.0:
             return a
         out = np.empty_like(a)
