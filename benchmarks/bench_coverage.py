@@ -15,7 +15,7 @@ reflection recordings with ``--ball-reflections 2`` as their ``meta.json`` says)
   omega_dot (and against noise + truncation bound);
 * seconds per recording (render and measure apart).
 
-Run (one process, nice; the 200-recording run takes about an hour on the shared machine)::
+Run (one process, nice; the 220-recording run took 12 minutes on the shared machine)::
 
     nice python benchmarks/bench_coverage.py --n 200 --out /tmp/cov
 """
