@@ -1,7 +1,6 @@
 """PNG figures of ``abu identify`` (fit and residuals) and ``abu design`` (bounds, slip time)."""
 from __future__ import annotations
 
-import io
 import math
 from pathlib import Path
 from typing import Any, Sequence
@@ -12,15 +11,7 @@ matplotlib.use("Agg")  # no display: tests and servers
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from abu_model.atomic_io import atomic_write_bytes  # noqa: E402
-
-
-def _save(fig, path: Path) -> Path:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+from .plots import save_png  # noqa: E402
 
 
 def plot_identify(result, path: Path) -> Path:
@@ -44,7 +35,7 @@ def plot_identify(result, path: Path) -> Path:
     bx.axhline(0.0, color="k", lw=0.5)
     bx.set_ylabel(f"residual [{unit}]")
     bx.set_xlabel("time [s]")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_design(design, path: Path, check: Sequence[dict[str, Any]] | None = None) -> Path:
@@ -80,4 +71,4 @@ def plot_design(design, path: Path, check: Sequence[dict[str, Any]] | None = Non
     bx.legend(fontsize=8)
     fig.suptitle(f"{design.omega0_hz} Hz -> {design.omega_end_hz:g} Hz, t0 = {design.t0_s:g} s, "
                  f"te = {design.te_s:.4g} s, {design.rounding}", fontsize=9)
-    return _save(fig, path)
+    return save_png(fig, path)

@@ -22,7 +22,8 @@ from abu_model.atomic_io import atomic_write_bytes  # noqa: E402
 PLOTS = ("omega", "omega_dot", "beta", "beta_dot", "mu_req")
 
 
-def _save(fig, path: Path) -> Path:
+def save_png(fig, path: Path) -> Path:
+    """Write ``fig`` as a PNG atomically and close it; returns the path."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -62,26 +63,26 @@ def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
     ax.set(xlabel="time [s]", ylabel="omega [rad/s]", title=f"ABU speed {title}")
     _hz_axis(ax)
     ax.legend(loc="best", fontsize=8)
-    written.append(_save(fig, out / f"{prefix}omega.png"))
+    written.append(save_png(fig, out / f"{prefix}omega.png"))
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(t, table["alpha"], lw=1.3)
     _mark_slip(ax, summary)
     ax.set(xlabel="time [s]", ylabel="omega_dot [rad/s^2]", title=f"ABU acceleration {title}")
-    written.append(_save(fig, out / f"{prefix}omega_dot.png"))
+    written.append(save_png(fig, out / f"{prefix}omega_dot.png"))
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(t, table["beta"], lw=1.3)
     _mark_slip(ax, summary)
     ax.set(xlabel="time [s]", ylabel="beta [rad]", title=f"Ball angle relative to the ABU {title}")
-    written.append(_save(fig, out / f"{prefix}beta.png"))
+    written.append(save_png(fig, out / f"{prefix}beta.png"))
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(t, table["beta_dot"], lw=1.3)
     _mark_slip(ax, summary)
     ax.set(xlabel="time [s]", ylabel="beta_dot [rad/s]",
            title=f"Ball speed relative to the ABU {title}")
-    written.append(_save(fig, out / f"{prefix}beta_dot.png"))
+    written.append(save_png(fig, out / f"{prefix}beta_dot.png"))
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     stuck = np.asarray(table["mode"]) == 0
@@ -97,5 +98,5 @@ def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
     ax.set(xlabel="time [s]", ylabel="mu_req = (l - d/5)|alpha| / (l omega^2) [-]",
            title=f"Friction needed to stick {title}")
     ax.legend(loc="best", fontsize=8)
-    written.append(_save(fig, out / f"{prefix}mu_req.png"))
+    written.append(save_png(fig, out / f"{prefix}mu_req.png"))
     return written

@@ -778,6 +778,25 @@ static State *new_state(Inst *c, PyObject *obj) {
     return s;
 }
 
+/* Keep `payload` (a Python state object) as the FMU state *FMUstate: in place of `existing`'s
+ * object when the host passed one of ours, else in a new state handle. */
+static fmi2Status keep_state(Inst *c, const char *fn, State *existing, PyObject *payload,
+                             fmi2FMUstate *FMUstate) {
+    if (existing) {
+        py.Py_IncRef(payload);
+        py.Py_DecRef(existing->obj);
+        existing->obj = payload;
+        return fmi2OK;
+    }
+    State *s = new_state(c, payload);
+    if (s == NULL) {
+        logf_inst(c, fmi2Error, "%s: out of memory", fn);
+        return fmi2Error;
+    }
+    *FMUstate = s;
+    return fmi2OK;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     BEGIN("fmi2GetFMUstate")
     if (FMUstate == NULL) {
@@ -793,17 +812,9 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     }
     PyObject *payload, *result = py.PyObject_CallMethod(c->obj, "get_state", NULL);
     st = finish(c, "fmi2GetFMUstate", result, &payload);
-    if (st <= fmi2Warning && payload != NULL) {
-        if (existing) {
-            py.Py_IncRef(payload);
-            py.Py_DecRef(existing->obj);
-            existing->obj = payload;
-        } else {
-            State *s = new_state(c, payload);
-            if (s == NULL) { logf_inst(c, fmi2Error, "fmi2GetFMUstate: out of memory"); st = fmi2Error; }
-            else *FMUstate = s;
-        }
-    }
+    if (st <= fmi2Warning && payload != NULL
+        && keep_state(c, "fmi2GetFMUstate", existing, payload, FMUstate) != fmi2OK)
+        st = fmi2Error;
     if (result) py.Py_DecRef(result);
     END()
 }
@@ -917,17 +928,9 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte ser
     PyObject *payload, *result = bytes ? py.PyObject_CallMethod(c->obj, "deserialize", "(O)", bytes) : NULL;
     if (bytes) py.Py_DecRef(bytes);
     st = finish(c, "fmi2DeSerializeFMUstate", result, &payload);
-    if (st <= fmi2Warning && payload != NULL) {
-        if (existing) {
-            py.Py_IncRef(payload);
-            py.Py_DecRef(existing->obj);
-            existing->obj = payload;
-        } else {
-            State *s = new_state(c, payload);
-            if (s == NULL) { logf_inst(c, fmi2Error, "fmi2DeSerializeFMUstate: out of memory"); st = fmi2Error; }
-            else *FMUstate = s;
-        }
-    }
+    if (st <= fmi2Warning && payload != NULL
+        && keep_state(c, "fmi2DeSerializeFMUstate", existing, payload, FMUstate) != fmi2OK)
+        st = fmi2Error;
     if (result) py.Py_DecRef(result);
     END()
 }
