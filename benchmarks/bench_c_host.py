@@ -63,26 +63,11 @@ def plain_env() -> dict[str, str]:
 
 
 def staircase_family(n: int, seed: int):
-    """The seeded family of tests/test_ssp.py: (experiment, abu simulate summary) pairs."""
-    import math
-    import random
+    """The seeded family of tests/test_ssp.py (one definition): (experiment, summary) pairs."""
+    sys.path[:0] = [str(REPO), str(REPO / "tests")]
+    from test_ssp import staircase_family as family
 
-    from abu_model.params import BallParams, PlantParams
-    from harness.experiments import StaircaseExperiment, ensure_fmus, run_staircase
-
-    rng, hz, out = random.Random(seed), 2 * math.pi, []
-    while len(out) < n:
-        w0 = rng.uniform(-25.0, -12.0)
-        exp = StaircaseExperiment(
-            PlantParams(BallParams(mu=rng.uniform(1.5e-3, 6e-3))), w0 * hz,
-            (w0 - rng.uniform(4.0, 8.0)) * hz, te=rng.uniform(0.6, 1.4),
-            rounding=rng.choice(["lead", "nearest", "trail"]),
-            theta_ref_mode=rng.choice(["integral", "thesis"]), comm_step=1e-3)
-        summary = run_staircase(exp, ensure_fmus()).summary
-        if summary["t_slip"] is not None and summary.get("slip_at_setpoint_step") \
-                and summary["mu_low"]:
-            out.append((exp, summary))
-    return out
+    return family(n, seed)
 
 
 def run_family(exe: Path, n: int, tmp: Path) -> bool:
