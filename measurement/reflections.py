@@ -31,6 +31,7 @@ import numpy as np
 from abu_model.errors import ParameterError
 
 from . import tracking as T
+from . import window_fits as W
 
 BALL_METHODS = ("outline", "pair")
 DEFAULT_BALL_METHOD = "outline"
@@ -44,7 +45,7 @@ EDGE_MODE = "local"
 NO_PAIR = T.FIT_FAILED
 
 
-def _plane_corrected(G: np.ndarray, geo: "T._WindowGeometry") -> tuple[np.ndarray, np.ndarray]:
+def _plane_corrected(G: np.ndarray, geo: "W.WindowGeometry") -> tuple[np.ndarray, np.ndarray]:
     K, w, _ = G.shape
     flat = G.reshape(K, w * w)
     ring = flat[:, geo.ring]
@@ -110,15 +111,15 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     body = np.median(H.reshape(K, -1)[:, inner.ravel()], axis=1).astype(np.float32)
     Hc = np.minimum(H, body[:, None, None])                  # reflections -> body level
     if opts.smooth:
-        Hc = T._smooth3(Hc)
+        Hc = W.smooth3(Hc)
         off = 1
     else:
         off = 0
     # the limb is darker than the top (shading) and the PSF spreads the edge: the silhouette
     # is where the profile falls to a third of the body level
     level = (LEVEL * body).astype(np.float32)
-    kk, xs, ys, above = T._crossings(Hc, level)
-    a, b, r, rms, cnt = T._robust_circle(kk, xs, ys, K)
+    kk, xs, ys, above = W.crossings(Hc, level)
+    a, b, r, rms, cnt = W.robust_circle(kk, xs, ys, K)
     if EDGE_REFINE and edges:
         a, b, r, rms, cnt = _gradient_edge(Hc, a, b, r)
     a += off
@@ -184,7 +185,7 @@ def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n
     xs = (a0[:, None] + ca * edge).ravel()
     ys = (b0[:, None] + sa * edge).ravel()
     kidx = np.repeat(np.arange(K), n_rays)
-    out = T._robust_circle(kidx, xs, ys, K)
+    out = W.robust_circle(kidx, xs, ys, K)
     for arr in out[:3]:
         arr[~good] = np.nan
     return out
@@ -211,7 +212,7 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
     ws = _ball_window(radius_px)
     n, hgt, wid = frames.shape
     half = ws // 2
-    geo = T._WindowGeometry.make(ws)
+    geo = W.WindowGeometry.make(ws)
     X = np.full(n, np.nan)
     Y = np.full(n, np.nan)
     R = np.full(n, np.nan)
@@ -226,7 +227,7 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
             y0 = np.rint(cy[start:stop]).astype(np.int64) - half
             inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
             x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
-            G = T._gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
+            G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
                           ws).astype(np.float32)
             if ball_method == "pair":
                 a, b, r, code = refine_pair(G, geo, opts)
@@ -250,7 +251,7 @@ def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) 
         if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
             continue
         G = frame[None, y0:y0 + ws, x0:x0 + ws].astype(np.float32)
-        geo = T._WindowGeometry.make(ws)
+        geo = W.WindowGeometry.make(ws)
         for guess in (default, 4.0, 6.0):
             a, b, r, code = refine_outline(G, geo, T.TrackingOptions(), guess)
             if code[0] == T.OK:
