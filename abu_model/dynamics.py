@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 from .params import BallParams, PlantParams
 
@@ -95,13 +96,13 @@ def slip_direction(plant: PlantParams, torque: float) -> int:
     return 1 if f_w > 0.0 else -1
 
 
-def slip_rhs(plant: PlantParams, direction: int, torque: float, rate: float, accel: float):
+def slip_rhs(plant: PlantParams, direction: int, torque_poly: Sequence[float]):
     """Right-hand side f(tau, y) of the slip ODE for y = [theta, omega, beta, beta', T_applied].
 
     The same equations as :func:`accelerations` in slip, inlined for speed (one call per
-    Runge-Kutta stage). Commanded torque T(tau) = torque + rate tau + accel tau^2/2 [N m];
-    without a motor lag T_applied follows it (T_applied' = rate + accel tau), with a lag
-    T_applied' = (T - T_applied)/tau_motor.
+    Runge-Kutta stage). Commanded torque T(tau) = sum c_i tau^i [N m] (``torque_poly``,
+    ascending, any degree); without a motor lag T_applied follows it (T_applied' = T'(tau)),
+    with a lag T_applied' = (T - T_applied)/tau_motor.
     """
     ball = plant.ball
     m, l, d = ball.m, ball.l, ball.d
@@ -115,11 +116,65 @@ def slip_rhs(plant: PlantParams, direction: int, torque: float, rate: float, acc
     else:
         J_abu = plant.J_abu
         a_t, a_w, b_t, b_w = 1.0 / J_abu, 0.0, -c / (M * J_abu), -l / M
+    # T (lag) or T' (no lag) as a polynomial in tau, evaluated by Horner in the closure
+    drive = tuple(reversed(torque_poly if tm != 0.0
+                           else [i * torque_poly[i] for i in range(1, len(torque_poly))] or [0.0]))
 
     def rhs(tau: float, y: list) -> list:
         omega, v, applied = y[1], y[3], y[4]
         f_w = f_scale * (l * (omega + v) ** 2 + 0.4 * l * v * v - 0.2 * d * omega * v)
-        d_applied = (rate + accel * tau if tm == 0.0
-                     else (torque + tau * (rate + 0.5 * accel * tau) - applied) / tm)
+        value = 0.0
+        for coefficient in drive:
+            value = value * tau + coefficient
+        d_applied = value if tm == 0.0 else (value - applied) / tm
         return [omega, a_t * applied + a_w * f_w, v, b_t * applied + b_w * f_w, d_applied]
     return rhs
+
+
+def alpha_taylor(plant: PlantParams, torque_derivatives: Sequence[float], applied: float,
+                 omega: float, beta_dot: float, mode: int, order: int) -> list[float]:
+    """d^k alpha / dt^k for k = 0..order [rad/s^(2+k)] at one instant, exact.
+
+    ``torque_derivatives`` are T, T', T'', ... of the commanded torque [N m/s^k] (missing
+    ones are 0); ``applied`` is the torque on the rotor [N m] (the lag's state, or T without
+    a lag). Taylor-mode recursion on the equations of motion: the right-hand side is a
+    quadratic in (omega, beta'), so the Taylor coefficients follow by Cauchy products.
+    """
+    ball = plant.ball
+    tm = plant.tau_motor
+    n = order + 1
+    fact = [1.0] * (n + 1)
+    for i in range(1, n + 1):
+        fact[i] = fact[i - 1] * i
+    T = [(torque_derivatives[k] if k < len(torque_derivatives) else 0.0) / fact[k]
+         for k in range(n)]
+    Ta = [applied] + T[1:]
+    if tm != 0.0:  # tm Ta' + Ta = T
+        for k in range(n - 1):
+            Ta[k + 1] = (T[k] - Ta[k]) / (tm * (k + 1))
+    if mode == STICK:
+        J = plant.J_total
+        return [Ta[k] / J * fact[k] for k in range(n)]
+    m, l, d = ball.m, ball.l, ball.d
+    f_scale = ball.mu_dynamic * mode * m
+    c, M = ball.coupling, ball.M_bb
+    if plant.ball_reaction:
+        J_tot = plant.J_total
+        det = J_tot * M - c * c
+        a_t, a_w, b_t, b_w = M / det, c * l / det, -c / det, -J_tot * l / det
+    else:
+        a_t, a_w, b_t, b_w = 1.0 / plant.J_abu, 0.0, -c / (M * plant.J_abu), -l / M
+    w, v = [omega] + [0.0] * n, [beta_dot] + [0.0] * n
+    alpha = []
+    for k in range(n):
+        # k-th Taylor coefficient of f_w / f_scale = l (w+v)^2 + 0.4 l v^2 - 0.2 d w v
+        f_k = 0.0
+        for i in range(k + 1):
+            s_i, s_j = w[i] + v[i], w[k - i] + v[k - i]
+            f_k += l * s_i * s_j + 0.4 * l * v[i] * v[k - i] - 0.2 * d * w[i] * v[k - i]
+        f_k *= f_scale
+        a_k = a_t * Ta[k] + a_w * f_k
+        alpha.append(a_k * fact[k])
+        w[k + 1] = a_k / (k + 1)
+        v[k + 1] = (b_t * Ta[k] + b_w * f_k) / (k + 1)
+    return alpha

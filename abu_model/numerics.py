@@ -46,6 +46,32 @@ def poly_der(c: Sequence[float]) -> list[float]:
     return [i * c[i] for i in range(1, len(c))]
 
 
+def poly_shift(c: Sequence[float], x0: float) -> list[float]:
+    """Coefficients of p(x0 + u) in u (ascending; Horner's synthetic division, Taylor shift)."""
+    out = list(c)
+    if x0 == 0.0:
+        return out
+    n = len(out)
+    for i in range(n - 1):
+        for j in range(n - 2, i - 1, -1):
+            out[j] += x0 * out[j + 1]
+    return out
+
+
+def poly_mul(a: Sequence[float], b: Sequence[float]) -> list[float]:
+    """Coefficients of the product (ascending)."""
+    out = [0.0] * (len(a) + len(b) - 1)
+    for i, x in enumerate(a):
+        for j, y in enumerate(b):
+            out[i + j] += x * y
+    return out
+
+
+def poly_int(c: Sequence[float], c0: float = 0.0) -> list[float]:
+    """Coefficients of c0 + the integral of c from 0 (ascending)."""
+    return [c0] + [v / (i + 1) for i, v in enumerate(c)]
+
+
 def _trim(c: Sequence[float]) -> list[float]:
     c = list(c)
     while c and c[-1] == 0.0:

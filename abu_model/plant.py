@@ -1,20 +1,26 @@
 """The ABU rotor with one ball as a hybrid (stick/slip) system, stepped with exact switches.
 
-:class:`AbuPlant` integrates one communication step with the commanded torque held to second
-order, T(tau) = torque + torque_rate tau + torque_accel tau^2/2 (pythonfmu has no input
-derivatives, so the rates are explicit inputs; torque_accel = 0 is the first-order hold).
-Inside the step every stick/slip switch is located exactly, with the standard library only
-(the plant runs inside FMUs; see :mod:`abu_model.numerics`):
+:class:`AbuPlant` integrates one communication step with the commanded torque held as a
+Taylor polynomial of any order, T(tau) = torque + torque_rate tau + torque_accel tau^2/2 +
+torque_jerk tau^3/6 + ... (pythonfmu has no input derivatives, so the derivatives are
+explicit inputs; missing ones are 0, a lower-order hold). Inside the step every stick/slip
+switch is located exactly, with the standard library only (the plant runs inside FMUs; see
+:mod:`abu_model.numerics`):
 
 * stick without motor lag: alpha and omega are polynomials in tau, so the stick test
-  mu omega^2 - (l - d/5)/l |alpha| >= 0 is a polynomial (degree 4, or 6 with torque_accel);
-  a cheap bound rules out a sign change in the step before any root is looked for, else its
-  first root is found by splitting into monotone pieces;
-* stick with a motor lag: the trajectory is closed-form (exponential + polynomial); the first
-  root is bracketed on a fine grid and found with a bracketing root finder;
+  mu omega^2 - (l - d/5)/l |alpha| >= 0 is a polynomial; a cheap bound rules out a sign
+  change in the step before any root is looked for, else its first root is found by
+  splitting into monotone pieces;
+* stick with a motor lag: the trajectory is closed-form (exponential + the lag's polynomial
+  particular solution sum_j (-tm)^j T^(j)); the first root is bracketed on a fine grid and
+  found with a bracketing root finder;
 * slip: the nonlinear ODE is integrated with a Dormand-Prince 5(4) pair at tight tolerances
   and the stop at beta' = 0 is located by re-stepping, where the ball either sticks again or
   slips back the other way.
+
+In stick the plant also keeps the largest mu_req of the step (``step_peak``), interior
+maxima included (a motor lag, or |omega| falling faster than |alpha|), so that mu_low is the
+true supremum and not a maximum over communication points.
 """
 from __future__ import annotations
 
@@ -22,9 +28,11 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 
-from .dynamics import accelerations, mu_required, slip_direction, slip_rhs, stick_holds
+from .dynamics import (accelerations, alpha_taylor, mu_required, slip_direction, slip_rhs,
+                       stick_holds)
 from .errors import AbuError
-from .numerics import brent_root, integrate_until, poly_eval, poly_first_negative, rk45_step
+from .numerics import (brent_root, integrate_until, poly_der, poly_eval, poly_first_negative,
+                       poly_int, poly_mul, poly_shift, rk45_step)
 from .params import PlantParams, check_finite
 
 #: A switch located within this time of a step's end [s] is taken at the step's end.
@@ -123,6 +131,8 @@ class AbuPlant:
         mode = Mode.STICK if beta_dot0 == 0.0 else Mode(int(math.copysign(1, beta_dot0)))
         self.state = PlantState(values["t0"], values["theta0"], values["omega0"], values["beta0"],
                                 values["beta_dot0"], values["torque0"], int(mode))
+        #: largest mu_req in stick over the last step [-] (0 without stick; an output)
+        self.step_peak = 0.0
 
     # ----------------------------------------------------------------- state handling
     def get_state(self) -> PlantState:
@@ -145,21 +155,40 @@ class AbuPlant:
         return PlantOutputs(acc.alpha, acc.beta_ddot, acc.normal_force, acc.friction_force,
                             mu_required(self.params.ball, acc.alpha, s.omega))
 
-    # ----------------------------------------------------------------- stepping
-    def advance(self, h: float, torque: float, torque_rate: float,
-                torque_accel: float = 0.0) -> list[Switch]:
-        """Integrate over [time, time + h] with T(tau) = torque + torque_rate tau + torque_accel tau^2/2.
+    def alpha_derivatives(self, torque_derivatives: list[float], order: int) -> list[float]:
+        """alpha, d(alpha)/dt, ... up to d^order(alpha)/dt^order now [rad/s^(2+k)], exact,
+        for the commanded torque's derivatives T, T', ... [N m/s^k] (see ``alpha_taylor``)."""
+        s = self.state
+        return alpha_taylor(self.params, torque_derivatives,
+                            self.applied_torque(torque_derivatives[0]), s.omega, s.beta_dot,
+                            s.mode, order)
 
-        Units: h [s], torque [N m], torque_rate [N m/s], torque_accel [N m/s^2].
+    # ----------------------------------------------------------------- stepping
+    def advance(self, h: float, torque: float, torque_rate: float, torque_accel: float = 0.0,
+                torque_jerk: float = 0.0, *higher: float) -> list[Switch]:
+        """Integrate over [time, time + h] with the commanded torque held as its Taylor
+        polynomial T(tau) = torque + torque_rate tau + torque_accel tau^2/2
+        + torque_jerk tau^3/6 (+ higher derivatives, any order).
+
+        Units: h [s], torque [N m], its k-th derivative [N m/s^k].
 
         Returns the switches that happened in the step, in time order. Raises
         :class:`SimulationError` if the ball would lift off the rim or chatter.
+        ``step_peak`` is then the largest mu_req in stick over the step (0 without stick).
         """
         if not (h >= 0.0 and math.isfinite(h)):
             raise ValueError(f"step size must be finite and >= 0 s, got {h!r}")
+        c = [torque, torque_rate, 0.5 * torque_accel, torque_jerk / 6.0]
+        factorial = 6.0
+        for k, value in enumerate(higher, start=4):
+            factorial *= k
+            c.append(value / factorial)
+        while len(c) > 1 and c[-1] == 0.0:  # a lower-order hold keeps its cheaper polynomials
+            c.pop()
         s = self.state
         if self.params.tau_motor == 0.0:
             s.torque_applied = torque
+        self.step_peak = 0.0
         start_time = s.time
         switches: list[Switch] = []
         tau = 0.0
@@ -169,14 +198,14 @@ class AbuPlant:
                     self._switch(switches, start_time + tau,
                                  slip_direction(self.params, s.torque_applied))
                     continue
-                tau_fail = self._advance_stick(tau, h, torque, torque_rate, torque_accel)
+                tau_fail = self._advance_stick(tau, h, c)
                 if tau_fail is None:
                     break
                 tau = tau_fail
                 self._switch(switches, start_time + tau,
                              slip_direction(self.params, s.torque_applied))
             else:
-                tau_zero = self._advance_slip(tau, h, torque, torque_rate, torque_accel)
+                tau_zero = self._advance_slip(tau, h, c)
                 if tau_zero is None:
                     break
                 tau = tau_zero
@@ -203,76 +232,101 @@ class AbuPlant:
         s.t_last_switch = float(t)
 
     # -- stick ------------------------------------------------------------------------
-    def _advance_stick(self, tau0: float, h: float, torque: float, rate: float,
-                       accel: float) -> float | None:
+    def _advance_stick(self, tau0: float, h: float, c: list[float]) -> float | None:
         """Advance in stick from tau0; stop at the first stick-test failure (returned) or at h."""
         if self.params.tau_motor == 0.0:
-            return self._advance_stick_polynomial(tau0, h, torque, rate, accel)
-        return self._advance_stick_lag(tau0, h, torque, rate, accel)
+            return self._advance_stick_polynomial(tau0, h, c)
+        return self._advance_stick_lag(tau0, h, c)
 
-    def _advance_stick_polynomial(self, tau0: float, h: float, torque: float, rate: float,
-                                  accel: float) -> float | None:
+    def _peak(self, alpha, alpha_rate, omega, u_end: float) -> None:
+        """Raise ``step_peak`` to the largest mu_req = k|alpha|/omega^2 on [0, u_end] (stick).
+
+        alpha, alpha_rate (= d alpha/du), omega: functions of u [rad/s^2, rad/s^3, rad/s].
+        d(mu_req)/du has the sign of D = alpha (alpha' omega - 2 alpha^2) omega; a maximum
+        inside is a fall of D through 0, looked for only where D falls between the ends.
+        """
+        k = self.params.ball.lever_ratio
+
+        def mu_req(u: float) -> float:
+            w = omega(u)
+            return k * abs(alpha(u)) / (w * w) if w != 0.0 else math.inf
+
+        def slope(u: float) -> float:
+            a, w = alpha(u), omega(u)
+            return a * (alpha_rate(u) * w - 2.0 * a * a) * w
+
+        peak = max(self.step_peak, mu_req(0.0), mu_req(u_end))
+        if u_end > 0.0:
+            d0, d1 = slope(0.0), slope(u_end)
+            if d0 > 0.0 and d1 < 0.0:
+                peak = max(peak, mu_req(brent_root(slope, 0.0, u_end, d0, d1)))
+        self.step_peak = peak
+
+    def _advance_stick_polynomial(self, tau0: float, h: float, c: list[float]) -> float | None:
         s, ball = self.state, self.params.ball
         J = self.params.J_total
-        # Polynomials in u = tau - tau0 (ascending coefficients); T(u) = T0 + r0 u + a u^2/2.
-        T0 = torque + rate * tau0 + 0.5 * accel * tau0 * tau0
-        r0 = rate + accel * tau0
-        alpha = (T0 / J, r0 / J, 0.5 * accel / J)
-        omega = (s.omega, T0 / J, 0.5 * r0 / J, accel / (6.0 * J))
-        n = 4 if accel != 0.0 else 3
-        mu_w2 = [0.0] * (2 * n - 1)
-        for i in range(n):
-            for j in range(n):
-                mu_w2[i + j] += omega[i] * omega[j]
-        mu_w2 = [ball.mu * v for v in mu_w2]
+        # Polynomials in u = tau - tau0 (ascending): T(u), alpha = T/J, omega = omega0 + int.
+        T = poly_shift(c, tau0)
+        alpha = [v / J for v in T]
+        omega = poly_int(alpha, s.omega)
+        mu_w2 = [ball.mu * v for v in poly_mul(omega, omega)]
         k = ball.lever_ratio
         span = h - tau0
         u_fail = None
         for sign in (1.0, -1.0):  # g = mu omega^2 -/+ k alpha
             g = list(mu_w2)
-            for i in range(3):
-                g[i] -= sign * k * alpha[i]
+            for i, a in enumerate(alpha):
+                g[i] -= sign * k * a
             u = poly_first_negative(g, span, END_TOLERANCE)
             if u is not None and (u_fail is None or u < u_fail):
                 u_fail = u
         u = span if u_fail is None else u_fail
-        s.theta = s.theta + u * (s.omega + u * (0.5 * T0 + u * (r0 / 6.0 + u * accel / 24.0)) / J)
+        d_alpha = poly_der(alpha) or [0.0]
+        self._peak(lambda x: poly_eval(alpha, x), lambda x: poly_eval(d_alpha, x),
+                   lambda x: poly_eval(omega, x), u)
+        s.theta = poly_eval(poly_int(omega, s.theta), u)
         s.omega = poly_eval(omega, u)
-        s.torque_applied = T0 + u * (r0 + 0.5 * accel * u)
+        s.torque_applied = poly_eval(T, u)
         return None if u_fail is None else tau0 + u_fail
 
-    def _lag_trajectory(self, tau0: float, torque: float, rate: float, accel: float):
+    def _lag_trajectory(self, tau0: float, c: list[float]):
         """Closed-form stick trajectory with the motor lag, as functions of u = tau - tau0.
 
-        Commanded T(u) = T0 + r0 u + a u^2/2; the applied torque is the lag's particular
-        solution A + B u + C u^2 plus D exp(-u/tm).
+        Commanded T(u) a polynomial; the applied torque is the lag's particular solution
+        P(u) = sum_j (-tm)^j T^(j)(u) of tm Ta' + Ta = T plus D exp(-u/tm).
         """
         s, tm, J = self.state, self.params.tau_motor, self.params.J_total
-        T0 = torque + rate * tau0 + 0.5 * accel * tau0 * tau0
-        r0 = rate + accel * tau0
-        C = 0.5 * accel
-        B = r0 - accel * tm
-        A = T0 - tm * B
-        D = s.torque_applied - A
+        T = poly_shift(c, tau0)
+        P, term, factor = list(T), T, 1.0
+        for _ in range(len(T) - 1):
+            term = poly_der(term)
+            factor *= -tm
+            for i, v in enumerate(term):
+                P[i] += factor * v
+        D = s.torque_applied - P[0]
+        int_P = poly_int(P)
+        int2_P = poly_int(int_P)
         omega0, theta0 = s.omega, s.theta
         exp, expm1 = math.exp, math.expm1
 
+        def commanded(u: float) -> float:
+            return poly_eval(T, u)
+
         def applied(u: float) -> float:
-            return A + B * u + C * u * u + D * exp(-u / tm)
+            return poly_eval(P, u) + D * exp(-u / tm)
 
         def omega(u: float) -> float:
-            return omega0 + (A * u + 0.5 * B * u * u + C * u**3 / 3.0
-                             + D * tm * -expm1(-u / tm)) / J
+            return omega0 + (poly_eval(int_P, u) + D * tm * -expm1(-u / tm)) / J
 
         def theta(u: float) -> float:
-            return theta0 + omega0 * u + (0.5 * A * u * u + B * u**3 / 6.0 + C * u**4 / 12.0
+            return theta0 + omega0 * u + (poly_eval(int2_P, u)
                                           + D * tm * (u + tm * expm1(-u / tm))) / J
-        return applied, omega, theta
+        return commanded, applied, omega, theta
 
-    def _advance_stick_lag(self, tau0: float, h: float, torque: float, rate: float,
-                           accel: float) -> float | None:
+    def _advance_stick_lag(self, tau0: float, h: float, c: list[float]) -> float | None:
         s, ball, J = self.state, self.params.ball, self.params.J_total
-        applied, omega, theta = self._lag_trajectory(tau0, torque, rate, accel)
+        tm = self.params.tau_motor
+        commanded, applied, omega, theta = self._lag_trajectory(tau0, c)
         k, mu = ball.lever_ratio, ball.mu
 
         def margin(u: float) -> float:  # >= 0 while the ball can stick
@@ -292,25 +346,26 @@ class AbuPlant:
             if margin(span + END_TOLERANCE) < 0.0:
                 u_fail = span
         u_end = span if u_fail is None else u_fail
+        self._peak(lambda x: applied(x) / J,
+                   lambda x: (commanded(x) - applied(x)) / (tm * J), omega, u_end)
         s.theta, s.omega = theta(u_end), omega(u_end)
         s.torque_applied = applied(u_end)
         return None if u_fail is None else tau0 + u_fail
 
     # -- slip -------------------------------------------------------------------------
-    def _advance_slip(self, tau0: float, h: float, torque: float, rate: float,
-                      accel: float) -> float | None:
+    def _advance_slip(self, tau0: float, h: float, c: list[float]) -> float | None:
         """Integrate the slip ODE from tau0; stop at beta' = 0 (returned) or at h."""
         s, params = self.state, self.params
         direction = s.mode
         if h <= tau0:
             return None
-        rhs = slip_rhs(params, direction, torque, rate, accel)
+        rhs = slip_rhs(params, direction, c)
 
         def stops(tau: float, y: list) -> float:  # beta' returns to zero
             return direction * y[3]
 
         y0 = [s.theta, s.omega, s.beta, s.beta_dot, s.torque_applied]
-        scale_torque = max(abs(torque), abs(rate) * h, abs(accel) * h * h, 1e-12)
+        scale_torque = max(max(abs(v) * h**i for i, v in enumerate(c)), 1e-12)
         atol = (1e-14, 1e-12, 1e-14, 1e-12, 1e-13 * scale_torque)
         try:
             tau, y, stopped = integrate_until(rhs, tau0, y0, h, SLIP_RTOL, atol, stops,
@@ -324,6 +379,5 @@ class AbuPlant:
         s.theta, s.omega, s.beta, s.beta_dot, s.torque_applied = y
         tau_zero = min(tau, h) if stopped else None
         if params.tau_motor == 0.0:
-            u = h if tau_zero is None else tau_zero
-            s.torque_applied = torque + rate * u + 0.5 * accel * u * u
+            s.torque_applied = poly_eval(c, h if tau_zero is None else tau_zero)
         return tau_zero

@@ -4,7 +4,9 @@ Used to cross-check the co-simulation. It shares the equations of motion
 (:mod:`.dynamics`) with the FMU but not the stepping: here the controller, the setpoint and
 the plant are one ODE (state theta, omega, beta, beta', x_I, applied torque) integrated by
 ``solve_ivp`` between setpoint steps, with event functions for the stick test
-(mu omega^2 -/+ (l - d/5)/l alpha = 0) in stick and for beta' = 0 in slip.
+(mu omega^2 -/+ (l - d/5)/l alpha = 0) in stick and for beta' = 0 in slip. The maxima of
+mu_req in stick are located too (a non-terminal event on d(mu_req)/dt = 0), so mu_low is the
+supremum over the stick period and not a maximum over solver points.
 
 The controller and the setpoint are passed duck-typed (objects with ``Kp``, ``Ki``,
 ``theta_ref_mode`` and with ``step_times``, ``levels``), so this package stays free of
@@ -102,6 +104,25 @@ def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
             g.terminal, g.direction = True, -1
             return g
 
+        def torque_rate(t, y, alpha):
+            """dT/dt of the commanded torque [N m/s] (segment's closed form if it has one)."""
+            rate = getattr(command, "torque_rate", None)
+            if rate is not None:
+                return rate(t, y, alpha)
+            e = 1e-7 * max(1.0, abs(t))  # central difference along the trajectory
+            f = rhs_for(Mode.STICK)(t, y)
+            return (command.torque(t + e, y + e * np.asarray(f))
+                    - command.torque(t - e, y - e * np.asarray(f))) / (2.0 * e)
+
+        def peak(t, y):
+            # d(mu_req)/dt in stick has the sign of alpha (alpha' omega - 2 alpha^2) omega:
+            # its falls through 0 are the maxima of mu_req between solver points.
+            alpha = applied(t, y) / plant.J_total
+            d_alpha = (torque_rate(t, y, alpha) if tm == 0.0
+                       else (command.torque(t, y) - y[5]) / tm) / plant.J_total
+            return alpha * (d_alpha * y[1] - 2.0 * alpha * alpha) * y[1]
+        peak.terminal, peak.direction = False, -1
+
         def slip_stop(direction):
             def g(t, y):
                 return direction * y[3]
@@ -122,7 +143,7 @@ def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
             if mode == Mode.STICK and not stick_holds(plant, applied(t, y), y[1]):
                 switch(t, y, slip_direction(plant, applied(t, y)))
                 continue
-            events = ([stick_margin(1.0), stick_margin(-1.0)] if mode == Mode.STICK
+            events = ([stick_margin(1.0), stick_margin(-1.0), peak] if mode == Mode.STICK
                       else [slip_stop(mode)])
             # An explicit first step: SciPy's automatic one can be below the spacing of t
             # (beta' = 0 with atol 1e-13), which re-fires the slip-stop event at t forever.
@@ -132,9 +153,14 @@ def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
             if not sol.success:
                 raise SimulationError(f"reference integration failed at t = {t:.9g} s: "
                                       f"{sol.message}")
-            hits = [(te[0], ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
+            hits = [(te[0], ye[0]) for te, ye, ev in zip(sol.t_events, sol.y_events, events)
+                    if te.size and ev.terminal]
             t_next = min(h[0] for h in hits) if hits else t_stop
-            for ti, yi in zip(sol.t, sol.y.T):
+            points = list(zip(sol.t, sol.y.T))
+            if mode == Mode.STICK:  # the maxima of mu_req between solver points
+                points += list(zip(sol.t_events[2], sol.y_events[2]))
+                points.sort(key=lambda point: point[0])
+            for ti, yi in points:
                 if t < ti < t_next:
                     record(ti, yi, mode)
             if not hits:
@@ -221,6 +247,10 @@ class _PISegment:
     def integral_rate(self, t: float, y: np.ndarray) -> float:
         return self.w_ref - y[1]
 
+    def torque_rate(self, t: float, y: np.ndarray, alpha: float) -> float:
+        """dT/dt = -Kp alpha + Ki (w_ref - w) [N m/s] (both readings)."""
+        return -self.law.Kp * alpha + self.law.Ki * (self.w_ref - y[1])
+
 
 class _PIStaircaseDrive:
     """The PI law on the staircase: constant setpoint between steps (right-continuous)."""
@@ -263,6 +293,9 @@ class _RampDrive:
 
     def integral_rate(self, t: float, y: np.ndarray) -> float:
         return 0.0
+
+    def torque_rate(self, t: float, y: np.ndarray, alpha: float) -> float:
+        return self.gain
 
 
 def simulate_ramp_reference(plant: PlantParams, omega0: float, jerk: float, t_end: float, *,

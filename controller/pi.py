@@ -89,9 +89,17 @@ class PISpeedController:
         """dT/dt between setpoint steps, -Kp alpha + Ki (w_ref - w) [N m/s]."""
         return -self.Kp * alpha + self.Ki * (omega_ref - omega)
 
-    def integral_increment(self, h: float, omega_ref: float, omega: float, alpha: float) -> float:
-        """x_I(t+h) - x_I(t) [rad] with omega(tau) = omega + alpha tau inside the step."""
-        return (omega_ref - omega) * h - 0.5 * alpha * h * h
+    def integral_increment(self, h: float, omega_ref: float, omega: float, alpha: float,
+                           *higher: float) -> float:
+        """x_I(t+h) - x_I(t) [rad] with omega(tau) = omega + alpha tau + sum_k
+        higher[k] tau^(k+2)/(k+2)! inside the step (higher: jerk [rad/s^3], snap, ...)."""
+        value = (omega_ref - omega) * h - 0.5 * alpha * h * h
+        power, factorial = h * h, 2.0
+        for k, derivative in enumerate(higher, start=3):
+            power *= h
+            factorial *= k
+            value -= derivative * power / factorial
+        return value
 
     def acceleration_jump(self, d_omega_ref: float, t_step: float = 0.0) -> float:
         """Jump of the rotor acceleration at a setpoint step d_omega_ref [rad/s] at t_step [s].

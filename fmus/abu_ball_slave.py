@@ -3,14 +3,19 @@
 Built by ``fmus.build`` into ``AbuBall.fmu`` as module ``abufmu_abuball``; ``abu_model``
 travels inside the FMU as ``abuball_abu_model`` (the build rewrites the imports below).
 
-Inputs: the commanded torque held to first or second order inside a step,
-T(tau) = torque + torque_rate tau + torque_accel tau^2/2 (the FMU has no
-fmi2SetRealInputDerivatives, so the rates are explicit inputs; connect the SpeedController's
-``torque_rate`` to it, or leave both 0 for a zero-order hold; ``torque_accel`` is optional,
-default 0, and registered last so that the other value references keep their numbers). ``do_step`` calls ``AbuPlant.advance``, which locates every stick/slip switch
+Inputs: the commanded torque held as its Taylor polynomial inside a step,
+T(tau) = torque + torque_rate tau + torque_accel tau^2/2 + torque_jerk tau^3/6
++ torque_snap tau^4/24 (the FMU has no fmi2SetRealInputDerivatives, so the derivatives are
+explicit inputs; connect the SpeedController's ``torque_rate``, ``torque_accel``, ... to
+them, or leave them 0 for a lower-order hold; the inputs after ``torque_rate`` are optional,
+default 0, and registered after the older variables so that their value references keep
+their numbers). The outputs ``jerk``, ``snap``, ``crackle`` are d^k(alpha)/dt^k, k = 1, 2, 3,
+for the torque inputs set so far (exact, for the controller's next torque derivative).
+``do_step`` calls ``AbuPlant.advance``, which locates every stick/slip switch
 inside the step exactly; the outputs report them (``switch_count``, ``t_last_switch``,
 ``step_switches``, ``t_first_step_switch``) so that a master can roll back and land a
-communication point on the first switch.
+communication point on the first switch. ``mu_req_peak`` is the largest mu_req in stick over
+the last step, maxima between communication points included.
 
 The algebraic outputs (alpha, beta_ddot, friction_force, mu_req, torque_applied) are computed
 from the state and the *current* torque input when read, so after fmi2SetReal at a
@@ -25,7 +30,6 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
-from abu_model.dynamics import accelerations
 from abu_model.params import DEFAULT_J_ABU, BallParams, PlantParams, check_finite, check_record
 from abu_model.plant import STATE_FIELDS, AbuPlant, Mode, PlantOutputs, PlantState
 
@@ -38,11 +42,12 @@ TIME_TOLERANCE = 1e-9
 _BALL = ("m", "d", "l", "mu", "mu_d")
 _PARAMETERS = _BALL + ("J_abu", "tau_motor", "ball_reaction", "theta0", "omega0", "beta0",
                        "beta_dot0")
-_INPUTS = ("torque", "torque_rate", "torque_accel")
+_INPUTS = ("torque", "torque_rate", "torque_accel", "torque_jerk", "torque_snap")
 
 #: Kinds of the saved state's entries (see ``check_record``).
 _STATE_KINDS = {**{name: "real" for name in _PARAMETERS + _INPUTS}, "ball_reaction": "bool",
-                "start_time": "real", "step_switches": "int", "t_first_step_switch": "real"}
+                "start_time": "real", "step_switches": "int", "t_first_step_switch": "real",
+                "step_peak": "real"}
 _PLANT_KINDS = {**{name: "real" for name in STATE_FIELDS}, "mode": "int",
                 "switch_count": "int", "t_last_switch": "extended"}
 
@@ -52,8 +57,8 @@ class AbuBall(Fmi2Slave):
 
     author = "abu-friction"
     description = ("ABU rotor with one ball on its rim: stick/slip dynamics (report ch. 3, app. A) "
-                   "with exact switch location inside each step; torque input held to first order "
-                   "T(tau) = torque + torque_rate tau")
+                   "with exact switch location inside each step; torque input held as its Taylor "
+                   "polynomial T(tau) = torque + torque_rate tau + torque_accel tau^2/2 + ...")
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=1e-3)
 
     UNITS = {
@@ -63,13 +68,17 @@ class AbuBall(Fmi2Slave):
         "theta": "rad", "omega": "rad/s", "alpha": "rad/s2", "beta": "rad", "beta_dot": "rad/s",
         "beta_ddot": "rad/s2", "normal_force": "N", "friction_force": "N", "mu_req": "1",
         "torque_applied": "N.m", "t_last_switch": "s", "t_first_step_switch": "s",
-        "jerk": "rad/s3",
+        "jerk": "rad/s3", "torque_jerk": "N.m/s3", "torque_snap": "N.m/s4", "snap": "rad/s4",
+        "crackle": "rad/s5", "mu_req_peak": "1",
     }
     OUTPUT_DEPENDENCIES = {
         "theta": (), "omega": (), "beta": (), "beta_dot": (), "normal_force": (),
         "alpha": ("torque",), "beta_ddot": ("torque",), "friction_force": ("torque",),
         "mu_req": ("torque",), "torque_applied": ("torque",),
         "jerk": ("torque", "torque_rate"),
+        "snap": ("torque", "torque_rate", "torque_accel"),
+        "crackle": ("torque", "torque_rate", "torque_accel", "torque_jerk"),
+        "mu_req_peak": (),
         "mode": (), "switch_count": (), "t_last_switch": (), "step_switches": (),
         "t_first_step_switch": (),
     }
@@ -89,10 +98,13 @@ class AbuBall(Fmi2Slave):
         self.torque = 0.0
         self.torque_rate = 0.0
         self.torque_accel = 0.0
+        self.torque_jerk = 0.0
+        self.torque_snap = 0.0
         # Internal state besides the plant's.
         self.start_time = 0.0
         self.step_switches = 0
         self.t_first_step_switch = NO_SWITCH
+        self.step_peak = 0.0
         self._plant: AbuPlant | None = None
         self._cache: tuple[float, PlantOutputs] | None = None
 
@@ -148,7 +160,7 @@ class AbuBall(Fmi2Slave):
         self.register_variable(Real(
             "jerk", description="d(alpha)/dt for the current torque inputs [rad/s3] (for a "
                                 "second-order hold of the controller's torque)",
-            getter=self._jerk, **out))
+            getter=lambda: self._alpha_derivative(1), **out))
         discrete = dict(causality=Fmi2Causality.output, variability=Fmi2Variability.discrete)
         self.register_variable(Integer("mode", description="-1 slip with beta_dot < 0, 0 stick, "
                                        "1 slip with beta_dot > 0", getter=lambda: self._int_state("mode"), **discrete))
@@ -164,6 +176,24 @@ class AbuBall(Fmi2Slave):
         self.register_variable(Real("torque_accel", description="second derivative of the "
                                     "commanded torque inside a step (second-order hold, "
                                     "optional) [N m/s2]", **inp))
+        self.register_variable(Real("torque_jerk", description="third derivative of the "
+                                    "commanded torque inside a step (third-order hold, "
+                                    "optional) [N m/s3]", **inp))
+        self.register_variable(Real("torque_snap", description="fourth derivative of the "
+                                    "commanded torque inside a step (fourth-order hold, "
+                                    "optional) [N m/s4]", **inp))
+        self.register_variable(Real(
+            "snap", description="d(jerk)/dt for the current torque inputs [rad/s4] (for a "
+                                "third-order hold of the controller's torque)",
+            getter=lambda: self._alpha_derivative(2), **out))
+        self.register_variable(Real(
+            "crackle", description="d(snap)/dt for the current torque inputs [rad/s5] (for a "
+                                   "fourth-order hold of the controller's torque)",
+            getter=lambda: self._alpha_derivative(3), **out))
+        self.register_variable(Real(
+            "mu_req_peak", description="largest mu_req while the ball sticks over the last "
+                                       "do_step, maxima inside the step included (0 if it did "
+                                       "not stick) [1]", getter=lambda: self.step_peak, **out))
 
     # ----------------------------------------------------------------- model
     def _plant_params(self) -> PlantParams:
@@ -212,23 +242,14 @@ class AbuBall(Fmi2Slave):
         outputs = self._outputs()
         return math.nan if outputs is None else getattr(outputs, name)
 
-    def _jerk(self) -> float:
-        """d(alpha)/dt now [rad/s3]: a central difference along the trajectory (exact up to
-        rounding for the report's model, where alpha = T/J_abu is linear in the torque)."""
+    def _alpha_derivative(self, order: int) -> float:
+        """d^order(alpha)/dt^order now [rad/s^(2+order)] for the current torque inputs: exact
+        (Taylor-mode recursion on the equations of motion, ``abu_model.dynamics``)."""
         plant = self._current_plant()
         if plant is None:
             return math.nan
-        p, s = plant.params, plant.state
-        applied = plant.applied_torque(self.torque)
-        d_applied = (self.torque_rate if p.tau_motor == 0.0
-                     else (self.torque - applied) / p.tau_motor)
-        acc = accelerations(p, applied, s.omega, s.beta_dot, s.mode)
-        eps = 1e-6  # [s]
-
-        def alpha_at(e: float) -> float:
-            return accelerations(p, applied + d_applied * e, s.omega + acc.alpha * e,
-                                 s.beta_dot + acc.beta_ddot * e, s.mode).alpha
-        return (alpha_at(eps) - alpha_at(-eps)) / (2.0 * eps)
+        inputs = [getattr(self, name) for name in _INPUTS[:order + 1]]
+        return plant.alpha_derivatives(inputs, order)[order]
 
     def _torque_applied(self) -> float:
         plant = self._current_plant()
@@ -249,6 +270,7 @@ class AbuBall(Fmi2Slave):
         self._plant = self._new_plant()
         self._cache = None
         self.step_switches, self.t_first_step_switch = 0, NO_SWITCH
+        self.step_peak = 0.0
 
     def do_step(self, current_time, step_size):
         plant = self._plant
@@ -266,7 +288,8 @@ class AbuBall(Fmi2Slave):
         saved = plant.get_state()
         plant.state.time = current_time  # follow the master's clock through rounding
         try:
-            switches = plant.advance(step_size, self.torque, self.torque_rate, self.torque_accel)
+            switches = plant.advance(step_size, self.torque, self.torque_rate, self.torque_accel,
+                                     self.torque_jerk, self.torque_snap)
         except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
             plant.set_state(saved)  # fmi2Discard: nothing advanced
             self.log(f"AbuBall '{self.instance_name}': step [{current_time!r}, "
@@ -275,6 +298,7 @@ class AbuBall(Fmi2Slave):
             return False
         self.step_switches = len(switches)
         self.t_first_step_switch = switches[0].time if switches else NO_SWITCH
+        self.step_peak = plant.step_peak
         self._cache = None
         return True
 
@@ -282,7 +306,7 @@ class AbuBall(Fmi2Slave):
     def _get_fmu_state(self):
         state = {name: getattr(self, name) for name in _PARAMETERS + _INPUTS}
         state.update(start_time=self.start_time, step_switches=self.step_switches,
-                     t_first_step_switch=self.t_first_step_switch,
+                     t_first_step_switch=self.t_first_step_switch, step_peak=self.step_peak,
                      plant=None if self._plant is None else self._plant.state.as_tuple())
         return state
 
@@ -316,6 +340,7 @@ class AbuBall(Fmi2Slave):
         self.start_time = float(state["start_time"])
         self.step_switches = int(state["step_switches"])
         self.t_first_step_switch = float(state["t_first_step_switch"])
+        self.step_peak = float(state["step_peak"])
         self._cache = None
         if state["plant"] is None:
             self._plant = None

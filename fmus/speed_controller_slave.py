@@ -8,10 +8,13 @@ T = Kp (omega_ref - omega) + Ki e_theta with Kp = 2 zeta omega_n J_abu, Ki = ome
 e_theta = x_I (theta_ref_mode 0, integral: x_I' = omega_ref - omega) or t omega_ref - theta
 (theta_ref_mode 1, the report's literal theta_ref = t omega_ref).
 
-First-order hold: the controller also outputs the torque rate
-T' = -Kp alpha + Ki (omega_ref - omega), valid between setpoint steps, for the plant's
-``torque_rate`` input. Inside a step the integrator sees omega(tau) = omega + alpha tau, so
-x_I advances by (omega_ref - omega) h - alpha h^2 / 2 (exact for a constant acceleration).
+Taylor hold of the torque: the controller also outputs the torque's derivatives between
+setpoint steps, T' = -Kp alpha + Ki (omega_ref - omega), T'' = -Kp jerk - Ki alpha,
+T^(3) = -Kp snap - Ki jerk, T^(4) = -Kp crackle - Ki snap (both readings of theta_ref), for
+the plant's ``torque_rate``, ``torque_accel``, ``torque_jerk``, ``torque_snap`` inputs, from
+the plant's d^k(alpha)/dt^k (inputs ``jerk``, ``snap``, ``crackle``; unconnected: 0, a
+lower-order hold). Inside a step the integrator sees omega(tau) as the same Taylor
+polynomial, omega + alpha tau + jerk tau^2/2 + snap tau^3/6 + crackle tau^4/24.
 The outputs are computed from the internal state and the current inputs whenever they are
 read, so after new inputs are set at a communication point they are the right-hand limits.
 """
@@ -28,7 +31,7 @@ from abu_model.params import check_record
 from controller.pi import THETA_REF_MODES, PISpeedController
 
 _PARAMETERS = ("zeta", "omega_n", "J_abu", "theta_ref_mode", "x_I0")
-_INPUTS = ("omega_ref", "omega", "theta", "alpha", "jerk")
+_INPUTS = ("omega_ref", "omega", "theta", "alpha", "jerk", "snap", "crackle")
 
 
 class SpeedController(Fmi2Slave):
@@ -36,20 +39,23 @@ class SpeedController(Fmi2Slave):
 
     author = "abu-friction"
     description = ("PI speed law T = Kp (omega_ref - omega) + Ki e_theta, Kp = 2 zeta omega_n "
-                   "J_abu, Ki = omega_n^2 J_abu (report eq. 4.4-4.5), with torque_rate output "
-                   "for a first-order hold of the torque")
+                   "J_abu, Ki = omega_n^2 J_abu (report eq. 4.4-4.5), with the torque's "
+                   "derivatives as outputs for a Taylor hold of the torque (up to 4th order)")
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=1e-3)
 
     UNITS = {
         "zeta": "1", "omega_n": "rad/s", "J_abu": "kg.m2", "x_I0": "rad",
         "omega_ref": "rad/s", "omega": "rad/s", "theta": "rad", "alpha": "rad/s2",
         "torque": "N.m", "torque_rate": "N.m/s", "x_I": "rad", "jerk": "rad/s3",
-        "torque_accel": "N.m/s2",
+        "torque_accel": "N.m/s2", "snap": "rad/s4", "crackle": "rad/s5",
+        "torque_jerk": "N.m/s3", "torque_snap": "N.m/s4",
     }
     OUTPUT_DEPENDENCIES = {
         "torque": ("omega_ref", "omega", "theta"),
         "torque_rate": ("omega_ref", "omega", "alpha"),
         "torque_accel": ("alpha", "jerk"),
+        "torque_jerk": ("jerk", "snap"),
+        "torque_snap": ("snap", "crackle"),
         "x_I": (),
     }
 
@@ -65,6 +71,8 @@ class SpeedController(Fmi2Slave):
         self.theta = 0.0
         self.alpha = 0.0
         self.jerk = 0.0
+        self.snap = 0.0
+        self.crackle = 0.0
         # Internal state.
         self.time = 0.0
         self.x_I = 0.0
@@ -96,6 +104,17 @@ class SpeedController(Fmi2Slave):
                                     getter=self._torque_accel, **out))
         self.register_variable(Real("x_I", description="integrator state (integral of omega_ref - omega) [rad]",
                                     getter=lambda: self.x_I, **out))
+        # Registered last: the value references above stay those of earlier versions.
+        self.register_variable(Real("snap", description="d(jerk)/dt of the ABU, for torque_jerk and the "
+                                    "integrator (third-order hold; 0: lower order) [rad/s4]", **inp))
+        self.register_variable(Real("crackle", description="d(snap)/dt of the ABU, for torque_snap and the "
+                                    "integrator (fourth-order hold; 0: lower order) [rad/s5]", **inp))
+        self.register_variable(Real("torque_jerk", description="third time derivative of the commanded "
+                                    "torque between setpoint steps, -Kp snap - Ki jerk [N m/s3]",
+                                    getter=self._torque_jerk, **out))
+        self.register_variable(Real("torque_snap", description="fourth time derivative of the commanded "
+                                    "torque between setpoint steps, -Kp crackle - Ki snap [N m/s4]",
+                                    getter=self._torque_snap, **out))
 
     # ----------------------------------------------------------------- model
     def _build_law(self) -> PISpeedController:
@@ -133,6 +152,14 @@ class SpeedController(Fmi2Slave):
         law = self._current_law()
         return math.nan if law is None else -law.Kp * self.jerk - law.Ki * self.alpha
 
+    def _torque_jerk(self) -> float:
+        law = self._current_law()
+        return math.nan if law is None else -law.Kp * self.snap - law.Ki * self.jerk
+
+    def _torque_snap(self) -> float:
+        law = self._current_law()
+        return math.nan if law is None else -law.Kp * self.crackle - law.Ki * self.snap
+
     # ----------------------------------------------------------------- FMI
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self.time = float(start_time)
@@ -149,9 +176,9 @@ class SpeedController(Fmi2Slave):
                 self.log(f"SpeedController '{self.instance_name}': input '{name}' = {value!r} "
                          f"at t = {current_time!r} s is not finite", Fmi2Status.error)
                 return False  # fmi2Discard: nothing advanced
-        # omega(tau) = omega + alpha tau + jerk tau^2/2 inside the step
-        self.x_I += (self._law.integral_increment(step_size, self.omega_ref, self.omega, self.alpha)
-                     - self.jerk * step_size ** 3 / 6.0)
+        # omega(tau) = omega + alpha tau + jerk tau^2/2 + snap tau^3/6 + crackle tau^4/24
+        self.x_I += self._law.integral_increment(step_size, self.omega_ref, self.omega,
+                                                 self.alpha, self.jerk, self.snap, self.crackle)
         self.time = current_time + step_size
         return True
 

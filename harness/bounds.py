@@ -14,6 +14,7 @@ UNITS: dict[str, str] = {
     "time": "s", "side": "1", "omega_ref": "rad/s", "torque": "N m", "torque_applied": "N m",
     "theta": "rad", "omega": "rad/s", "alpha": "rad/s^2", "beta": "rad", "beta_dot": "rad/s",
     "normal_force": "N", "friction_force": "N", "mu_req": "1", "mode": "1",
+    "mu_req_peak": "1",
 }
 #: Units of the summary's numbers.
 SUMMARY_UNITS: dict[str, str] = {
@@ -73,20 +74,25 @@ def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, An
                     first_step: float | None = None) -> dict[str, Any]:
     """mu_low, mu_high and the slip instant of a recorded run (DESIGN.md sec. 3).
 
-    mu_low is the largest mu_req recorded before the first stick -> slip switch, including the
-    left limit at the slip instant; mu_high is mu_req at the right limit there (the last row
+    mu_low is the largest mu_req before the first stick -> slip switch, including the left
+    limit at the slip instant, and between communication points: a row's ``mu_req_peak`` (if
+    recorded) is the largest mu_req in stick over the step that ended at it, so mu_low is the
+    supremum over the stick period, not a maximum over sample points; mu_high is mu_req at the right limit there (the last row
     at that time). If alpha is continuous at the slip, both equal mu. Without a slip,
     mu_high and t_slip are None and mu_low is the largest mu_req of the whole (stuck) run.
     A slip at or before ``first_step`` [s] (the first setpoint step) leaves no stick period
     with an acceleration: mu_low is None (there is no lower bound).
     """
     t, side, mu_req = table["time"], table["side"], table["mu_req"]
+    if "mu_req_peak" in table:
+        mu_req = np.maximum(mu_req, table["mu_req_peak"])
     first = next((s for s in switches if s["from_mode"] == 0 and s["to_mode"] != 0), None)
     if first is None:
         stuck = table["mode"] == 0
         return {"mu_low": float(np.max(mu_req[stuck])) if stuck.any() else 0.0,
                 "mu_high": None, "t_slip": None, "omega_slip": None, "alpha_slip": None}
     t_slip = first["time_s"]
+    mu_at = table["mu_req"]  # the limits themselves (mu_high is a right-hand limit)
     at = np.flatnonzero(np.abs(t - t_slip) <= 1e-9)
     if at.size == 0:  # not on a communication point: take the nearest
         at = np.array([int(np.argmin(np.abs(t - t_slip)))])
@@ -95,7 +101,7 @@ def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, An
     mu_low = float(np.max(mu_req[before])) if before.any() else 0.0
     if first_step is not None and t_slip <= first_step + 1e-9:
         mu_low = None
-    return {"mu_low": mu_low, "mu_high": float(mu_req[right]), "t_slip": float(t_slip),
+    return {"mu_low": mu_low, "mu_high": float(mu_at[right]), "t_slip": float(t_slip),
             "omega_slip": float(table["omega"][right]), "alpha_slip": float(table["alpha"][right])}
 
 

@@ -35,8 +35,14 @@ _PLANT_PROBES = {
     "theta": "plant.theta", "omega": "plant.omega", "alpha": "plant.alpha",
     "beta": "plant.beta", "beta_dot": "plant.beta_dot", "normal_force": "plant.normal_force",
     "friction_force": "plant.friction_force", "mu_req": "plant.mu_req", "mode": "plant.mode",
-    "torque_applied": "plant.torque_applied",
+    "torque_applied": "plant.torque_applied", "mu_req_peak": "plant.mu_req_peak",
 }
+#: The plant's inputs T, T', T'', ... and outputs alpha, alpha', alpha'', ... of a Taylor
+#: hold (the SpeedController has the same names the other way round).
+_TORQUE_DERIVATIVES = ("torque", "torque_rate", "torque_accel", "torque_jerk", "torque_snap")
+_ALPHA_DERIVATIVES = ("alpha", "jerk", "snap", "crackle")
+#: Default order of the torque's Taylor hold in the staircase (the FMUs support up to 4).
+HOLD_ORDER = 4
 
 def _plant_parameters(plant: PlantParams) -> dict[str, Any]:
     ball = plant.ball
@@ -88,6 +94,7 @@ class StaircaseExperiment:
         t_start: start of the simulation [s]; None: min(0, t0 - 0.05 s), so that the table
             holds the steady state and both limits of the first step.
         tol: coupling error tolerance [-] of the error-controlled steps (None: see comm_step).
+        hold_order: order of the torque's Taylor hold, 1..4 (None: :data:`HOLD_ORDER`).
     """
 
     plant: PlantParams
@@ -105,10 +112,13 @@ class StaircaseExperiment:
     beta0: float = 0.0
     t_start: float | None = None
     tol: float | None = None
+    hold_order: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.plant, PlantParams):
             raise ParameterError("plant", self.plant, "a PlantParams instance")
+        if self.hold_order is not None and self.hold_order not in (1, 2, 3, 4):
+            raise ParameterError("hold_order", self.hold_order, "1, 2, 3 or 4 (or None)")
         for name in ("omega0", "omega_end", "t0", "te", "step", "zeta", "omega_n", "beta0"):
             object.__setattr__(self, name, check_finite(name, getattr(self, name)))
         _check_stepping(self)
@@ -142,21 +152,30 @@ class StaircaseExperiment:
     def system(self, fmus: Mapping[str, Path]) -> System:
         """The co-simulated system: Staircase -> SpeedController <-> AbuBall.
 
-        The torque is held to second order (torque, torque_rate, torque_accel) when the
-        AbuBall FMU has the ``torque_accel`` input, else to first order; the controller's
-        integrator sees omega to the same order (omega, alpha, jerk). The holds' scales are
-        one setpoint step [rad/s] and its torque jump J_total 2 zeta wn step [N m].
+        The torque is held as its Taylor polynomial of order ``hold_order`` (default
+        :data:`HOLD_ORDER`; lower if the FMUs lack the inputs): the controller's torque,
+        torque_rate, torque_accel, torque_jerk, ... feed the plant, the plant's alpha, jerk,
+        snap, ... feed the controller, whose integrator sees omega to the same order. The
+        holds' scales are one setpoint step [rad/s] and its torque jump J_total 2 zeta wn
+        step [N m].
         """
         plant = _plant_parameters(self.plant)
         plant.update(theta0=self.omega0 * self.t_start, omega0=self.omega0, beta0=self.beta0,
                      beta_dot0=0.0)
-        second = _has_input(fmus["AbuBall"], "torque_accel")
-        extra = ((Connection("plant.jerk", "ctrl.jerk"),
-                  Connection("ctrl.torque_accel", "plant.torque_accel")) if second else ())
+        order = max(1, min(HOLD_ORDER if self.hold_order is None else self.hold_order,
+                           len(_TORQUE_DERIVATIVES) - 1))
+        while order > 1 and not (_has_input(fmus["AbuBall"], _TORQUE_DERIVATIVES[order])
+                                 and _has_input(fmus["SpeedController"],
+                                                _ALPHA_DERIVATIVES[order - 1])):
+            order -= 1  # older FMUs: the highest order both have
+        extra = tuple(Connection(f"plant.{_ALPHA_DERIVATIVES[k]}", f"ctrl.{_ALPHA_DERIVATIVES[k]}")
+                      for k in range(1, order)) + tuple(
+            Connection(f"ctrl.{_TORQUE_DERIVATIVES[k]}", f"plant.{_TORQUE_DERIVATIVES[k]}")
+            for k in range(2, order + 1))
         torque_scale = self.plant.J_total * 2.0 * self.zeta * self.omega_n * abs(self.step)
-        holds = (Hold("ctrl.torque", ("ctrl.torque_rate",) + (("ctrl.torque_accel",)
-                                                             if second else ()), torque_scale),
-                 Hold("plant.omega", ("plant.alpha",) + (("plant.jerk",) if second else ()),
+        holds = (Hold("ctrl.torque", tuple(f"ctrl.{n}" for n in _TORQUE_DERIVATIVES[1:order + 1]),
+                      torque_scale),
+                 Hold("plant.omega", tuple(f"plant.{n}" for n in _ALPHA_DERIVATIVES[:order]),
                       abs(self.step)))
         return System(
             components=(

@@ -34,7 +34,7 @@ STRETCH = 0.2
 #: switch from the inputs held over the step (e.g. a slip that starts from a continuous
 #: acceleration: mu_req(t) = mu with the held torque), so the steps from the rollback to the
 #: switch run at tol * SWITCH_TIGHTEN; only these few steps get finer.
-SWITCH_TIGHTEN = 1e-4
+SWITCH_TIGHTEN = 1e-2
 
 
 class Runner:

@@ -23,7 +23,7 @@ from .recording import SwitchEvent
 from .system import Hold
 
 #: Default tolerance of the coupling error [-] (relative to each hold's scale).
-DEFAULT_TOL = 1e-5
+DEFAULT_TOL = 1e-9
 #: Default largest communication step in error-controlled mode [s].
 DEFAULT_MAX_STEP = 0.05
 #: Default first communication step in error-controlled mode [s].

@@ -5,17 +5,18 @@ from __future__ import annotations
 import json
 
 from harness.cli import main
+from harness.stepping import DEFAULT_TOL
 
 
 def test_tol_and_comm_step_select_the_stepping(fmu_dir, capsys):
     folder = str(fmu_dir["AbuBall"].parent)
     runs = {}
-    for name, args in (("default", []), ("tight", ["--tol", "1e-7"]),
+    for name, args in (("default", []), ("tight", ["--tol", "1e-10"]),
                        ("fixed", ["--comm-step", "5e-3"])):
         assert main(["simulate", *args, "--fmu-dir", folder, "--json"]) == 0
         runs[name] = json.loads(capsys.readouterr().out)
-    assert runs["default"]["experiment"]["tol"] == 1e-5
-    assert runs["tight"]["experiment"]["tol"] == 1e-7
+    assert runs["default"]["experiment"]["tol"] == DEFAULT_TOL == 1e-9
+    assert runs["tight"]["experiment"]["tol"] == 1e-10
     assert runs["fixed"]["experiment"]["tol"] is None
     assert runs["fixed"]["cosim"]["rejected"] == 0 and runs["fixed"]["cosim"]["steps"] >= 310
     # a tighter tolerance takes more, smaller steps, and moves the bounds by less than 1e-6

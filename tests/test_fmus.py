@@ -243,10 +243,14 @@ DECLARED = {
                 "omega": set(), "beta": set(), "beta_dot": set(), "normal_force": set(),
                 "mode": set(), "switch_count": set(), "t_last_switch": set(),
                 "step_switches": set(), "t_first_step_switch": set(),
-                "jerk": {"torque", "torque_rate"}},
+                "jerk": {"torque", "torque_rate"},
+                "snap": {"torque", "torque_rate", "torque_accel"},
+                "crackle": {"torque", "torque_rate", "torque_accel", "torque_jerk"},
+                "mu_req_peak": set()},
     "SpeedController": {"torque": {"omega_ref", "omega", "theta"},
                         "torque_rate": {"omega_ref", "omega", "alpha"}, "x_I": set(),
-                        "torque_accel": {"alpha", "jerk"}},
+                        "torque_accel": {"alpha", "jerk"}, "torque_jerk": {"jerk", "snap"},
+                        "torque_snap": {"snap", "crackle"}},
     "Staircase": {"omega_ref": set(), "next_event_time": set(), "step_index": set()},
 }
 
