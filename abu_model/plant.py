@@ -256,10 +256,23 @@ class AbuPlant:
             return a * (alpha_rate(u) * w - 2.0 * a * a) * w
 
         peak = max(self.step_peak, mu_req(0.0), mu_req(u_end))
-        if u_end > 0.0:
-            d0, d1 = slope(0.0), slope(u_end)
-            if d0 > 0.0 and d1 < 0.0:
-                peak = max(peak, mu_req(brent_root(slope, 0.0, u_end, d0, d1)))
+        d1 = slope(u_end) if u_end > 0.0 else 0.0
+        if d1 < 0.0:
+            lo, d_lo = 0.0, slope(0.0)
+            a0, a1 = alpha(0.0), alpha(u_end)
+            if (a0 < 0.0) != (a1 < 0.0) and a0 != 0.0 and a1 != 0.0:
+                # |alpha| passes through 0 (a minimum of mu_req): a maximum can only follow
+                lo, d_lo = brent_root(alpha, 0.0, u_end, a0, a1), 0.0
+            if d_lo == 0.0:  # alpha = 0 at lo: D first rises from 0 if a maximum follows
+                x = u_end
+                for _ in range(60):
+                    x = lo + 0.5 * (x - lo)
+                    d_x = slope(x)
+                    if d_x > 0.0:
+                        lo, d_lo = x, d_x
+                        break
+            if d_lo > 0.0:
+                peak = max(peak, mu_req(brent_root(slope, lo, u_end, d_lo, d1)))
         self.step_peak = peak
 
     def _advance_stick_polynomial(self, tau0: float, h: float, c: list[float]) -> float | None:

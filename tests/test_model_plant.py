@@ -234,3 +234,58 @@ def test_short_slips_near_the_margin_are_not_stepped_over(mu, omega0, sign, torq
     if len(switches) >= 2:
         SHORT_SLIPS["restuck"] += switches[1].time < h
         SHORT_SLIPS["shortest_s"] = min(SHORT_SLIPS["shortest_s"], switches[1].time)
+
+
+# -- the largest mu_req between communication points (mu_low is a supremum) ------------------
+def _ramp_peak(ball, omega0, jerk):
+    """alpha = K t, omega = w0 + K t^2/2 (w0, K > 0): d(mu_req)/dt = 0 at t* = sqrt(2 w0/(3 K)),
+    where mu_req = k K t* / (4 w0 / 3)^2 (closed form)."""
+    t_star = math.sqrt(2.0 * omega0 / (3.0 * jerk))
+    return t_star, ball.lever_ratio * jerk * t_star / (4.0 * omega0 / 3.0) ** 2
+
+
+@pytest.mark.parametrize("h", [0.5, 0.07, 0.013])
+def test_step_peak_is_the_closed_form_maximum_of_mu_req_inside_a_step(h):
+    params = PlantParams(ball=BallParams(mu=0.03))
+    w0, K = 100.0, 3000.0
+    t_star, peak = _ramp_peak(params.ball, w0, K)
+    plant = AbuPlant(params, omega0=w0)
+    J, peaks, t = params.J_total, [], 0.0
+    while t < 0.4:
+        assert not plant.advance(h, J * K * t, J * K)  # stuck throughout
+        peaks.append((t, plant.step_peak))
+        t += h
+    t_a, found = max(peaks, key=lambda p: p[1])
+    assert found == pytest.approx(peak, rel=1e-13)
+    assert t_a < t_star < t_a + h  # from the step that holds t*
+    ends = [params.ball.lever_ratio * K * x / (w0 + K * x * x / 2) ** 2 for x in (t_a, t_a + h)]
+    assert max(ends) < peak * (1 - 1e-6)  # the communication points alone miss it
+
+
+def test_step_peak_with_a_motor_lag_matches_a_bounded_maximiser():
+    """A torque step through the lag: alpha = (T/J)(1 - e^(-t/tm)) rises while omega grows,
+    so mu_req peaks inside the first step (scipy's bounded maximiser on the closed form)."""
+    from scipy.optimize import minimize_scalar
+
+    params = PlantParams(ball=BallParams(mu=0.05), tau_motor=0.01)
+    J, tm, w0, T = params.J_total, 0.01, 100.0, params.J_total * 400.0
+    k = params.ball.lever_ratio
+
+    def mu_req(t):
+        alpha = T / J * -math.expm1(-t / tm)
+        omega = w0 + T / J * (t + tm * math.expm1(-t / tm))
+        return k * alpha / omega**2
+    best = minimize_scalar(lambda t: -mu_req(t), bounds=(0.0, 0.2), method="bounded",
+                           options={"xatol": 1e-12})
+    plant = AbuPlant(params, omega0=w0)
+    assert not plant.advance(0.2, T, 0.0)
+    assert 0.0 < best.x < 0.2 and mu_req(0.2) < -best.fun * (1 - 1e-3)
+    assert plant.step_peak == pytest.approx(-best.fun, rel=1e-12)
+
+
+def test_monolithic_reference_finds_the_same_peak_between_its_points():
+    params = PlantParams(ball=BallParams(mu=0.03))
+    w0, K = 100.0, 3000.0
+    res = simulate_ramp_reference(params, w0, K, 0.4)
+    assert res.t_slip is None
+    assert res.mu_low == pytest.approx(_ramp_peak(params.ball, w0, K)[1], rel=1e-10)
