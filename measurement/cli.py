@@ -116,7 +116,7 @@ def _track_frames(args: argparse.Namespace, fps: float, check=None) -> dict:
                                         f"{hint}") from None
     return {"time": time, "x": x, "y": y, "lost": lost, "seeds": seeds, "source": rec.source,
             "seeds_note": roles_note, "method": tracks.method, "window": tracks.window,
-            "lost_reasons": tracks.lost_summary()}
+            "lost_reasons": tracks.lost_summary(), "frame_size": (w, h)}
 
 
 def _tracking_info(tr: dict, fps: float) -> dict:
@@ -174,6 +174,9 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if getattr(args, "drive", None):  # a bad drive.json fails before the tracking
         from controller.drive import load_drive
         load_drive(args.drive)
+    if getattr(args, "camera", None):  # so does a bad camera file
+        from .camera import read_camera
+        read_camera(args.camera)
     l = in_range("--l", _positive("--l", args.l, "m"), 1e-4, 1.0, "m",
                  "radius of the ball centre's path; a CD drive's is 1.15e-2 m")
     d = in_range("--d", _positive("--d", args.d, "m"), 1e-5, 0.1, "m",
@@ -223,9 +226,14 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
         time, x_f, y_f, lost = tr["time"], tr["x"], tr["y"], tr["lost"]
         tracking = _tracking_info(tr, fps)
     check_motion_and_roles(time, x_f, y_f, str(args.input))
-    table, summary = analyse_tracks(time, x_f, y_f, l=l, d=d, lost=lost, options=options)
+    x_a, y_a, camera = x_f, y_f, None
+    if getattr(args, "camera", None):  # undistort; theta's harmonic prior from the calibration
+        from .cli_camera import apply_camera
+        x_a, y_a, options, camera = apply_camera(
+            args.camera, x_f, y_f, None if args.tracks else tr["frame_size"], options)
+    table, summary = analyse_tracks(time, x_a, y_a, l=l, d=d, lost=lost, options=options)
     summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracking,
-               **summary}
+               **summary, **({"camera": camera} if camera else {})}
     if getattr(args, "drive", None):
         from controller.drive import load_drive
         summary["drive"] = load_drive(args.drive).to_dict()
@@ -333,14 +341,25 @@ def cmd_render(args: argparse.Namespace) -> int:
         if getattr(args, "drive", None):
             raise ParameterError("--drive", args.drive, "no --drive with --scenario random "
                                  "(its drive is drawn at random)")
+        if args.calibration_views:
+            from .calibration_target import MAX_VIEWS
+            integer_range("--calibration-views", args.calibration_views, 1, MAX_VIEWS,
+                          "chessboard views for 'abu calibrate-camera'")
         from .scenario import random_scenario, render_scenario
         scn = random_scenario(args.seed, size=args.size, lighting=args.lighting,
                               n_frames=args.frames)
         with output_folder(out, overwrite=args.overwrite) as tmp:
             render_scenario(tmp, scn)
+            if args.calibration_views:  # chessboard views through the same lens and sensor
+                from .calibration_target import write_views
+                write_views(tmp / "calibration", scn.optics, scn.width, scn.height,
+                            args.calibration_views, scn.seed, pixel_size_m=scn.pixel_size)
         _log(args, f"wrote the random twin recording (seed {args.seed}, mu = {scn.ball.mu:.5g}, "
                    f"{scn.drive.kind} drive, {scn.lighting.kind} lighting) to {out}")
         return 0
+    if getattr(args, "calibration_views", 0):
+        raise ParameterError("--calibration-views", args.calibration_views, "0 with --scenario "
+                             "report (its lens is ideal; use --scenario random)")
     from .twin import render_twin, twin_settings_from_args
     from harness.cli_plan import apply_drive_to_args
     apply_drive_to_args(args)
@@ -426,6 +445,8 @@ def register(subparsers) -> None:
     p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify' of the setup that "
                    "made the recording (recorded in summary.json for 'abu next')")
+    from .cli_camera import add_camera_option, register as register_camera
+    add_camera_option(p)
     p.set_defaults(func=cmd_measure)
 
     p = subparsers.add_parser("measure-summary", help="combine the intervals of several records",
@@ -456,6 +477,7 @@ def register(subparsers) -> None:
                    "and tau_motor replace --zeta, --omega-n, --tau-motor")
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
     p.set_defaults(func=cmd_render)
+    register_camera(subparsers)
 
 
 def build_parser() -> argparse.ArgumentParser:

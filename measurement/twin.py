@@ -358,6 +358,10 @@ def add_render_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lighting", choices=["ring", "two_spot"], default=None,
                    help="--scenario random: force the TL ring or the two-spot lighting (two "
                         "reflections on the ball; default: drawn, 25 %% two_spot)")
+    p.add_argument("--calibration-views", type=int, default=0,
+                   help="--scenario random: also write K chessboard views through the same lens "
+                        "and sensor into calibration/ (for 'abu calibrate-camera'; default 0; "
+                        "the benchmark uses 30)")
 
 
 def twin_settings_from_args(args: argparse.Namespace) -> TwinSettings:

@@ -1,0 +1,118 @@
+"""``abu calibrate-camera`` and the ``--camera`` step of ``abu measure``.
+
+``abu calibrate-camera VIEWS --pattern 9x6 --out camera.json``: VIEWS is a folder of images (or
+a multi-page TIFF / .npy stack) of a chessboard plate lying in the ABU plane, moved and turned
+between views (``abu render --scenario random --calibration-views K`` writes such a folder for
+the twin). The camera file is written atomically; bad input is one line and exit 2.
+
+``abu measure --camera camera.json``: every tracked pixel position (all markers, both ball
+reflections through the ball position they give) is undistorted before the angles are taken, and
+the prior bound on theta's first harmonic (``InferenceOptions.theta_harmonic_rad``) comes from
+the calibration (:func:`measurement.camera.theta_harmonic_prior`) instead of the family prior.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from abu_model.errors import ParameterError
+from harness.cli_common import add_overwrite, in_range
+from harness.output_tx import output_file
+
+from . import camera as cam_mod
+
+
+def cmd_calibrate_camera(args: argparse.Namespace) -> int:
+    """Find the chessboard in every view, calibrate, write the camera file."""
+    from .frames_io import read_recording
+    from .json_text import dumps
+
+    pattern = cam_mod.parse_pattern(args.pattern)
+    focal = None if args.focal_px is None else in_range(
+        "--focal-px", args.focal_px, 1.0, 1e6, "px", "the fixed focal length (any fixed value "
+        "gives the same undistortion; default the half diagonal)")
+    square = in_range("--square", args.square, 1e-9, 1e9, "", "the side of a square (any unit)")
+    rec = read_recording(args.views)
+    names = rec.frame_names or [f"{rec.source} frame {i}" for i in range(len(rec))]
+    cam, rows = cam_mod.calibrate_from_frames(np.asarray(rec.frames), pattern, focal_px=focal,
+                                              square=square, names=names)
+    cam.extra["source"] = rec.source
+    with output_file(args.out, overwrite=args.overwrite) as tmp:
+        cam_mod.write_camera(tmp, cam)
+    if args.json:
+        sys.stdout.write(dumps(cam.to_dict()))
+    else:
+        k, dc = cam.camera_matrix, cam.dist_coeffs
+        print(f"camera from {cam.n_views} of {len(rows)} views ({cam.n_corners} corners): "
+              f"k1 = {dc[0]:.5g}, k2 = {dc[1]:.5g}, centre ({k[0, 2]:.2f}, {k[1, 2]:.2f}) px, "
+              f"f = {k[0, 0]:.1f} px (fixed), reprojection RMS {cam.rms_px:.4f} px -> {args.out}")
+    return 0
+
+
+def apply_camera(path: str, x: np.ndarray, y: np.ndarray, frame_size: tuple[int, int] | None,
+                 options):
+    """Undistort (N, 3) tracked positions and set the theta-harmonic prior from the camera.
+
+    Returns (x, y, options, info for summary.json). ``frame_size`` (width, height) [px] of the
+    recording, or None for a tracks file (then the positions must lie in the camera's image).
+    """
+    from .analysis import fixed_axis
+
+    cam = cam_mod.read_camera(path)
+    w, h = cam.image_size
+    if frame_size is not None and tuple(frame_size) != (w, h):
+        raise ParameterError("--camera", path, f"a camera calibrated on {frame_size[0]}x"
+                             f"{frame_size[1]} px frames (it was calibrated on {w}x{h} px)")
+    if not ((x > -0.5) & (x < w - 0.5) & (y > -0.5) & (y < h - 0.5)).all():
+        raise ParameterError("--camera", path, f"a camera whose {w}x{h} px image holds every "
+                             "tracked position (some lie outside it)")
+    xu, yu = cam_mod.undistort_pixels(x, y, cam)
+    ax, ay = fixed_axis(xu, yu)
+    axis = (float(ax[0, 0]), float(ay[0, 0]))
+    r_cd = float(np.median(np.hypot(xu[:, 1] - axis[0], yu[:, 1] - axis[1])))
+    prior = cam_mod.theta_harmonic_prior(cam, axis, r_cd)
+    inf = options.inference
+    if inf is not None:
+        options = replace(options, inference=replace(
+            inf, theta_harmonic_rad=float(prior["theta_harmonic_rad"])))
+    k = cam.camera_matrix
+    info = {"file": str(path), "reprojection_rms_px": cam.rms_px, "n_views": cam.n_views,
+            "k1": float(cam.dist_coeffs[0]), "k2": float(cam.dist_coeffs[1]),
+            "optical_centre_px": [float(k[0, 2]), float(k[1, 2])],
+            "axis_px": list(axis), "r_cd_px": r_cd,
+            "max_correction_px": float(np.max(np.hypot(xu - x, yu - y))),
+            "theta_harmonic_prior": prior,
+            "note": "tracked positions undistorted before the angles; tracks.csv keeps the "
+                    "tracker's (distorted) positions"}
+    return xu, yu, options, info
+
+
+def add_camera_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--camera", default=None,
+                   help="camera.json of 'abu calibrate-camera': undistort the tracked positions "
+                        "and take theta's harmonic prior from the calibration")
+
+
+def register(subparsers) -> None:
+    """Add ``calibrate-camera`` to ``subparsers``."""
+    p = subparsers.add_parser(
+        "calibrate-camera", help="lens calibration from chessboard views in the ABU plane",
+        description="Find the chessboard's inner corners in every view (OpenCV "
+                    "findChessboardCorners + cornerSubPix), fit the radial lens distortion and "
+                    "its centre (calibrateCamera; focal length fixed, square pixels, no "
+                    "tangential terms, k3 = 0) and write camera.json for 'abu measure --camera'.")
+    p.add_argument("views", help="folder of views (PNG, BMP, TIFF), multi-page TIFF or .npy")
+    p.add_argument("--pattern", default="9x6",
+                   help="inner corners per row x per column (default 9x6: 10x7 squares)")
+    p.add_argument("--out", required=True, help="camera file to write (JSON)")
+    add_overwrite(p)
+    p.add_argument("--focal-px", type=float, default=None,
+                   help="fixed focal length [px] (default: half the image diagonal)")
+    p.add_argument("--square", type=float, default=1.0,
+                   help="side of a square (any unit; default 1)")
+    p.add_argument("--json", action="store_true", help="print the camera file on stdout")
+    p.set_defaults(func=cmd_calibrate_camera)
