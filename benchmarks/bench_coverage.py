@@ -13,11 +13,17 @@ reflection recordings with ``--ball-reflections 2`` as their ``meta.json`` says)
 * the acceleration bias at the slip: the estimator applied to the *true* theta (no noise) minus
   the true omega_dot at the first slip frame, against the recording's 1-sigma noise bar of
   omega_dot (and against noise + truncation bound);
-* seconds per recording (render and measure apart).
+* seconds per recording (render and measure apart);
+* with ``--camera``: per recording the chessboard views of its optics are rendered
+  (``measurement.calibration_target``), ``abu calibrate-camera`` fits the lens and ``abu
+  measure --camera`` undistorts the tracks; printed beside: median |k1 error|, reprojection
+  RMS, seconds, and the first harmonic of theta's error (measured - truth) against the prior
+  bound the measurement used (the calibration's, or the family's 8e-4 rad without camera).
 
 Run (one process, nice; the 220-recording run took 12 minutes on the shared machine)::
 
     nice python benchmarks/bench_coverage.py --n 200 --out /tmp/cov
+    nice python benchmarks/bench_coverage.py --n 200 --camera --out /tmp/cov_cam
 """
 from __future__ import annotations
 
@@ -41,12 +47,50 @@ import numpy as np  # noqa: E402
 from harness.cli import main as abu_main  # noqa: E402
 from measurement import kinematics as kin_mod  # noqa: E402
 from measurement.analysis import AnalysisOptions  # noqa: E402
+from measurement.calibration_target import DEFAULT_VIEWS, render_views  # noqa: E402
+from measurement.inference import InferenceOptions  # noqa: E402
 from measurement.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
 
+#: theta's harmonic prior without a camera file (the family prior).
+THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
 
-def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
-    """Render and measure one recording; the row of the results table."""
+
+def calibrate(scn, work: Path, views: int) -> tuple[Path, dict]:
+    """Render the scenario's calibration views (same optics), run ``abu calibrate-camera``."""
+    t0 = time.perf_counter()
+    frames, _, _ = render_views(scn.optics, scn.width, scn.height, views, scn.seed)
+    stack = work / f"cal{scn.seed}.npy"
+    np.save(stack, frames)
+    cam = work / f"cam{scn.seed}.json"
+    err = io.StringIO()
+    with redirect_stdout(io.StringIO()), redirect_stderr(err):
+        status = abu_main(["calibrate-camera", str(stack), "--pattern", "9x6", "--out",
+                           str(cam), "--overwrite"])
+    stack.unlink()
+    if status != 0:
+        raise RuntimeError(f"calibrate-camera failed: {err.getvalue().strip()}")
+    c = json.loads(cam.read_text())
+    o = scn.optics
+    return cam, {"cal_s": time.perf_counter() - t0, "cal_rms_px": c["reprojection_rms_px"],
+                 "cal_k1_err": c["dist_coeffs"][0] - o.k1, "cal_k2_err": c["dist_coeffs"][1] - o.k2,
+                 "cal_centre_err_px": math.hypot(c["camera_matrix"][0][2] - o.optical_centre[0],
+                                                 c["camera_matrix"][1][2] - o.optical_centre[1])}
+
+
+def theta_first_harmonic(times: np.ndarray, theta: np.ndarray, theta_true: np.ndarray) -> float:
+    """Amplitude [rad] of the first harmonic of the measured theta's error (regressed with
+    1, t, t^2, as benchmarks/bench_kinematic_error.py does)."""
+    tc = times - times.mean()
+    design = np.column_stack([np.ones_like(tc), tc, tc ** 2, np.sin(theta_true),
+                              np.cos(theta_true)])
+    coef = np.linalg.lstsq(design, theta - theta_true, rcond=None)[0]
+    return float(np.hypot(*coef[3:]))
+
+
+def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0) -> dict:
+    """Render and measure one recording; the row of the results table (``views`` > 0: with
+    a camera calibrated on that many chessboard views, ``abu measure --camera``)."""
     t0 = time.perf_counter()
     scn = random_scenario(seed, size=size, lighting=lighting)
     state, pos = simulate_scenario(scn)
@@ -58,6 +102,11 @@ def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
     refl = int(scn.lighting.reflections)
     args = ["measure", str(rec), "--out", str(out), "--overwrite", "--quiet", "--no-plots",
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+    cal = {}
+    if views:
+        cam, cal = calibrate(scn, work, views)
+        args += ["--camera", str(cam)]
+        t1 = time.perf_counter()
     if refl == 2:
         args += ["--ball-reflections", "2"]
     err = io.StringIO()
@@ -67,7 +116,7 @@ def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
     row = {"seed": seed, "reflections": refl, "mu": scn.ball.mu, "mu_d": scn.ball.mu_dynamic,
            "drive": scn.drive.kind, "tau_motor_s": scn.drive.tau_motor,
            "setpoint_tau_s": scn.drive.setpoint_tau,
-           "render_s": t1 - t0, "measure_s": t2 - t1, "exit": status}
+           "render_s": t1 - t0, "measure_s": t2 - t1, "exit": status, **cal}
     rec.unlink()
     if status != 0:
         row["error"] = err.getvalue().strip().splitlines()[-1:] or ["?"]
@@ -83,6 +132,9 @@ def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
                                        "profile_mu_low", "profile_mu_high", "ar1_rho",
                                        "t_slip")})
     row["t_slip_true"] = float(state["switches"][0]) if len(state["switches"]) else None
+    cam_info = s.get("camera") or {}
+    row["theta_prior_rad"] = (cam_info.get("theta_harmonic_prior") or {}).get(
+        "theta_harmonic_rad", THETA_PRIOR_DEFAULT)
     rm = s["running_max"]
     row.update({"rm_low": rm["mu_low"], "rm_high": rm["mu_high"], "rm_status": rm["status"]})
     # acceleration bias at the first slip frame: the estimator on the true theta
@@ -96,6 +148,8 @@ def one(seed: int, work: Path, size: int, lighting: str | None) -> dict:
             kin = list(csv.DictReader(fh))
         sig = float(kin[i]["sigma_omega_dot_rad_s2"])
         bnd = float(kin[i]["bias_omega_dot_rad_s2"] or 0.0)
+        th = np.array([float(k["theta_rad"]) for k in kin])
+        row["theta_a1_rad"] = theta_first_harmonic(scn.times, th, state["theta"])
         row.update({"slip_frame": i, "acc_bias": float(clean.omega_dot[i] - state["alpha"][i]),
                     "acc_sigma": sig, "acc_bound": bnd, "acc_true": float(state["alpha"][i])})
     return row
@@ -186,6 +240,22 @@ def report(rows: list[dict], label: str) -> None:
               f"its 1-sigma noise bar in {100 * np.mean(z < 1):.1f} % of {len(a)} (below noise + "
               f"truncation bound: {100 * np.mean(zt < 1):.1f} %); median |bias|/sigma "
               f"{np.median(z):.2f}, median relative bias {100 * np.median(rel):.2f} %")
+    h = [r for r in ok if r.get("theta_a1_rad") is not None]
+    if h:
+        a1 = np.array([r["theta_a1_rad"] for r in h])
+        pr = np.array([r["theta_prior_rad"] for r in h])
+        print(f"  first harmonic of theta's error (measured theta - truth): median "
+              f"{np.median(a1):.2e} rad, 90th percentile {np.percentile(a1, 90):.2e}; within "
+              f"the prior bound used (median {np.median(pr):.2e} rad) in "
+              f"{100 * np.mean(a1 <= pr):.1f} % of {len(h)}")
+    c = [r for r in rows if "cal_rms_px" in r]
+    if c:
+        print(f"  calibration ({len(c)}): median |k1 error| "
+              f"{np.median([abs(r['cal_k1_err']) for r in c]):.2e}, median |k2 error| "
+              f"{np.median([abs(r['cal_k2_err']) for r in c]):.2e}, median centre error "
+              f"{np.median([r['cal_centre_err_px'] for r in c]):.2f} px, reprojection RMS "
+              f"median {np.median([r['cal_rms_px'] for r in c]):.4f} px, seconds "
+              f"{np.mean([r['cal_s'] for r in c]):.2f} (render views + calibrate-camera)")
     print(f"  seconds per recording: render {np.mean([r['render_s'] for r in rows]):.1f}, "
           f"measure (abu measure, in-process, no plots) "
           f"{np.mean([r['measure_s'] for r in rows]):.2f}")
@@ -200,6 +270,11 @@ def main() -> None:
                          "the family's)")
     ap.add_argument("--size", type=int, default=256, help="frame size [px]")
     ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
+    ap.add_argument("--camera", action="store_true",
+                    help="per recording: render chessboard views through its optics, "
+                         "'abu calibrate-camera', then 'abu measure --camera'")
+    ap.add_argument("--views", type=int, default=DEFAULT_VIEWS,
+                    help=f"calibration views with --camera (default {DEFAULT_VIEWS})")
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
@@ -229,7 +304,7 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp, open(log, "a") as fh:
         for k, (seed, lighting) in enumerate(jobs):
-            row = one(seed, Path(tmp), args.size, lighting)
+            row = one(seed, Path(tmp), args.size, lighting, args.views if args.camera else 0)
             row["forced_lighting"] = lighting
             rows.append(row)
             fh.write(json.dumps(row) + "\n")
@@ -240,7 +315,9 @@ def main() -> None:
                   f"{row['measure_s']:.1f} s)", flush=True)
     print(f"\nfamily: measurement.scenario.random_scenario(seed), seeds {args.first}.."
           f"{args.first + args.n - 1} (+{args.two_spot} forced two-spot), {args.size} px, "
-          f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}")
+          f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
+          + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"
+             if args.camera else "no camera calibration (family prior on theta's harmonic)"))
     report(rows, "all recordings")
     report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
     report([r for r in rows if r["reflections"] == 2], "two reflections (--ball-reflections 2)")
