@@ -140,8 +140,12 @@ def alpha_taylor(plant: PlantParams, torque_derivatives: Sequence[float], applie
     a lag). Taylor-mode recursion on the equations of motion: the right-hand side is a
     quadratic in (omega, beta'), so the Taylor coefficients follow by Cauchy products.
     """
-    ball = plant.ball
     tm = plant.tau_motor
+    if mode == STICK and tm == 0.0:  # alpha = T / J_total: the input's own derivatives
+        J = plant.J_total
+        return [applied / J] + [(torque_derivatives[k] if k < len(torque_derivatives) else 0.0)
+                                / J for k in range(1, order + 1)]
+    ball = plant.ball
     n = order + 1
     fact = [1.0] * (n + 1)
     for i in range(1, n + 1):

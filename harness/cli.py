@@ -125,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "error-controlled steps)")
     g.add_argument("--tol", type=float, default=None,
                    help="coupling error tolerance [-] of the error-controlled steps (default "
-                        "1e-5: bounds within about 1e-6 relative; see docs/harness.md)")
+                        "1e-9: bounds within about 1e-10 relative, switch times within "
+                        "1e-9 s; see docs/harness.md)")
     g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built there if missing; "
                                                    "default: a temporary build)")
     g.add_argument("--out", default=None, help="write result.csv, summary.json and PNG plots here")

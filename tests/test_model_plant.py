@@ -289,3 +289,50 @@ def test_monolithic_reference_finds_the_same_peak_between_its_points():
     res = simulate_ramp_reference(params, w0, K, 0.4)
     assert res.t_slip is None
     assert res.mu_low == pytest.approx(_ramp_peak(params.ball, w0, K)[1], rel=1e-10)
+
+
+# -- exact d^k(alpha)/dt^k for the controller's Taylor hold -----------------------------------
+def test_alpha_derivatives_in_stick_are_the_closed_forms():
+    d = [3e-3, -0.04, 0.9, -12.0]  # T, T', T'', T''' [N m/s^k]
+    no_lag = AbuPlant(PlantParams(), omega0=-100.0)
+    J = no_lag.params.J_total
+    assert no_lag.alpha_derivatives(d, 3) == pytest.approx([x / J for x in d], rel=1e-15)
+    tm, Ta = 0.004, 1e-3
+    lag = AbuPlant(PlantParams(tau_motor=tm), omega0=-100.0, torque0=Ta)
+    expected, value = [], Ta  # tm Ta' + Ta = T, differentiated: Ta^(k+1) = (T^(k) - Ta^(k))/tm
+    for k in range(4):
+        expected.append(value / J)
+        value = (d[k] - value) / tm
+    assert lag.alpha_derivatives(d, 3) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("tau_motor, reaction", [(0.0, False), (0.004, False), (0.0, True),
+                                                 (0.004, True)])
+def test_alpha_derivatives_in_slip_match_the_integrated_trajectory(tau_motor, reaction):
+    """Slip (beta' = 5 rad/s): d(alpha)/dt and d2(alpha)/dt2 against 5-point differences of
+    alpha along the plant's own integrated trajectory."""
+    params = PlantParams(ball=BallParams(mu=2e-3), tau_motor=tau_motor, ball_reaction=reaction)
+    J = params.J_total
+    d = [J * -40.0, J * -900.0, J * 6000.0, J * 1e4]
+
+    def plant():
+        return AbuPlant(params, omega0=-100.0, torque0=1e-3, beta_dot0=5.0, t0=-1.0)
+
+    e0 = 1e-4
+    derivs = plant().alpha_derivatives(d, 2)
+    # alpha(tau) for tau in [0, 4 e0] from the state at tau = 0; one-sided 5-point formulas
+    p0 = plant()
+    values = []
+    for i in range(5):
+        p = plant()
+        if i:
+            p.advance(i * e0, *d)
+        tau = i * e0
+        T = sum(d[k] * tau**k / math.factorial(k) for k in range(4))
+        values.append(p.outputs(T).alpha)
+    v = values
+    d1 = (-25 * v[0] + 48 * v[1] - 36 * v[2] + 16 * v[3] - 3 * v[4]) / (12 * e0)
+    d2 = (35 * v[0] - 104 * v[1] + 114 * v[2] - 56 * v[3] + 11 * v[4]) / (12 * e0**2)
+    assert p0.outputs(d[0]).alpha == pytest.approx(derivs[0], rel=1e-14)
+    assert derivs[1] == pytest.approx(d1, rel=1e-6)
+    assert derivs[2] == pytest.approx(d2, rel=1e-3)
