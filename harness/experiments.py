@@ -211,6 +211,7 @@ class StaircaseExperiment:
                 "rounding": self.rounding, "theta_ref_mode": self.theta_ref_mode,
                 "zeta": self.zeta, "omega_n_rad_s": self.omega_n, "comm_step_s": self.comm_step,
                 "tol": _effective_tol(self), "beta0_rad": self.beta0,
+                "hold_order": HOLD_ORDER if self.hold_order is None else self.hold_order,
                 "step_times_s": list(self.staircase.step_times)}
 
 
