@@ -33,7 +33,9 @@ STRETCH = 0.2
 #: Tolerance factor on the approach to a switch found inside a step. An FMU locates such a
 #: switch from the inputs held over the step (e.g. a slip that starts from a continuous
 #: acceleration: mu_req(t) = mu with the held torque), so the steps from the rollback to the
-#: switch run at tol * SWITCH_TIGHTEN; only these few steps get finer.
+#: switch run at tol * SWITCH_TIGHTEN; only these few steps get finer. Measured on the
+#: accuracy family (fourth-order hold, tol 1e-9): worst switch 3.8e-10 s at 1e-2, 5.8e-10 s
+#: at 1 (no tightening), 3.4e-10 s at 1e-4 with 40 % more steps.
 SWITCH_TIGHTEN = 1e-2
 
 
