@@ -37,7 +37,7 @@ PRE_ROLL_S = 0.05
 #: Largest setpoint step [Hz] of table41 (the report's is 1 Hz).
 MAX_STEP_HZ = 100.0
 MIN_STEP_HZ = 1e-3
-#: Accepted range of the coupling tolerance --tol [-] (harness.stepping; default 1e-5).
+#: Accepted range of the coupling tolerance --tol [-] (harness.stepping; default 1e-9).
 MIN_TOL, MAX_TOL = 1e-10, 1e-1
 #: Largest closed-loop damping ratio / natural frequency [-, rad/s] the loop check may meet.
 MAX_ZETA = 1000.0
