@@ -104,7 +104,9 @@ def main() -> None:
           f" median |relative error of q| {100 * np.median(rels):.2f} %")
     zo = np.array(z_or)
     a1, pr = np.array(a1s), np.array(priors)
-    print(f"{'undistorted with the calibrated camera (' + str(a.views) + ' views)' if a.camera else 'no camera'}: "
+    how = f"undistorted with the calibrated camera ({a.views} views)" if a.camera else \
+        "no camera"
+    print(f"{how}: "
           f"first harmonic of theta's error within the prior bound used in "
           f"{100 * np.mean(a1 <= pr):.1f} % of {a1.size} (median prior {np.median(pr):.2e} rad, "
           f"median a1 / prior {np.median(a1 / pr):.2f})")

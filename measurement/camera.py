@@ -153,9 +153,7 @@ def read_camera(path: str | os.PathLike) -> Camera:
         cov = _num_array(p, cv, "matrix", lambda a: a.shape == (4, 4) and np.allclose(a, a.T)
                          and (np.diag(a) >= 0).all(),
                          "a symmetric 4x4 covariance of (cx, cy, k1, k2)")
-    known = {"kind", "format_version", "model", "image_size_px", "camera_matrix",
-             "dist_coeffs", "reprojection_rms_px", "n_views", "n_corners",
-             "distortion_covariance"}
+    known = set(Camera(k, dist, (1, 1), 0.0, 1).to_dict())
     return Camera(camera_matrix=k, dist_coeffs=dist, image_size=(int(size[0]), int(size[1])),
                   rms_px=float(rms), n_views=int(views), n_corners=int(d.get("n_corners") or 0),
                   covariance=cov, extra={**{a: b for a, b in d.items() if a not in known},
@@ -346,8 +344,8 @@ def _covariance(obj, img_pts, kk, dist, rvecs, tvecs) -> np.ndarray:
 # ------------------------------------------------------------------------------ prior
 
 
-def _theta_harmonics(cam: Camera, params: np.ndarray, axis: np.ndarray, r_px: float,
-                     phi: np.ndarray, ideal: np.ndarray) -> np.ndarray:
+def _theta_harmonics(cam: Camera, params: np.ndarray, phi: np.ndarray, ideal: np.ndarray
+                     ) -> np.ndarray:
     """(a1s, a1c, a2s, a2c) of the theta error [rad] on the CD circle when observed points
     (distorted by ``cam``) are undistorted with (cx, cy, k1, k2) = ``params``; the axis is
     re-fitted as a circle centre, as the analysis does."""
@@ -389,13 +387,12 @@ def theta_harmonic_prior(cam: Camera, axis_xy: tuple[float, float], r_px: float)
                    cam.dist_coeffs[1]], float)
     sd = np.sqrt(np.maximum(np.diag(cam.covariance), 0.0))
     steps = np.where(sd > 0, sd, np.array([1e-3, 1e-3, 1e-6, 1e-6]))
-    h0 = _theta_harmonics(cam, p0, np.asarray(axis_xy), r_px, phi, ideal)
+    h0 = _theta_harmonics(cam, p0, phi, ideal)
     jac = np.zeros((4, 4))
     for j in range(4):
         dp = np.zeros(4)
         dp[j] = steps[j]
-        jac[:, j] = (_theta_harmonics(cam, p0 + dp, np.asarray(axis_xy), r_px, phi, ideal)
-                     - h0) / steps[j]
+        jac[:, j] = (_theta_harmonics(cam, p0 + dp, phi, ideal) - h0) / steps[j]
     cov_h = jac @ cam.covariance @ jac.T
     q = math.sqrt(-2.0 * math.log(1.0 - PRIOR_QUANTILE))
     a1 = q * math.sqrt(max(float(np.linalg.eigvalsh(cov_h[:2, :2]).max()), 0.0))
