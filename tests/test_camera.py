@@ -193,6 +193,14 @@ def test_measure_with_the_camera_is_narrower_and_holds_mu(rendered, tmp_path, ca
             assert s[t]["status"] == "ok" and s[t]["mu_low"] <= mu <= s[t]["mu_high"], (rec, t)
         assert "camera" not in s["plain"]
     assert all(cam_w < plain_w for plain_w, cam_w in widths)
+    # tracks.csv keeps the tracker's (distorted) positions: --tracks --camera repeats the result
+    again = tmp_path / "again"
+    assert main(["measure", str(tmp_path / f"{rec.name}_camera" / "tracks.csv"), "--tracks",
+                 "--camera", str(cam), "--out", str(again), "--no-plots", "--quiet",
+                 "--l", repr(l)]) == 0
+    s2 = json.loads((again / "summary.json").read_text())
+    assert s2["mu_low"] == pytest.approx(s["camera"]["mu_low"], rel=1e-9)
+    assert s2["mu_high"] == pytest.approx(s["camera"]["mu_high"], rel=1e-9)
 
 
 def test_camera_of_another_frame_size_is_refused(rendered, tmp_path, capsys):
