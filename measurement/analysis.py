@@ -177,7 +177,8 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
         inf = inference_mod.infer_mu(time, theta, harm.beta_clean, kin.omega, kin.omega_dot,
                                      kin.sigma_omega, kin.sigma_omega_dot, kin.bias_omega_dot,
                                      trusted, l=l, d=d, direction=direction, lost=lost_any,
-                                     deviation=iv.deviation, options=opt.inference)
+                                     deviation=iv.deviation, record_residual=harm.residual,
+                                     options=opt.inference)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}
 
 

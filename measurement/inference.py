@@ -88,7 +88,7 @@ class InferenceOptions:
     """
 
     confidence: float = 0.95
-    harmonic_orders: tuple[int, ...] = ()
+    harmonic_orders: tuple[int, ...] = (1, 2, 3, 4)
     theta_harmonics: bool = False
     n_mu: int = 48
     n_mu_d: int = 8
@@ -144,6 +144,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
              bias_omega_dot: np.ndarray, trusted: np.ndarray, *, l: float, d: float,
              direction: int, lost: np.ndarray | None = None,
              deviation: np.ndarray | None = None,
+             record_residual: np.ndarray | None = None,
              options: InferenceOptions | None = None) -> Inference:
     """Confidence sets on mu and mu_d from beta(t) and the measured kinematics.
 
@@ -157,6 +158,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         lost: (N,) bool, frames where the ball or CD marker was interpolated.
         deviation: (N,) smoothed deviation of the harmonic-cleaned beta from its stick value
             along the slip direction [rad] (``interval``); it sets the end of the fit window.
+        record_residual: (N,) residual of the whole-record harmonic fit [rad]; the leftover
+            noise is also estimated on its trusted part (``noise_models.leftover_whitener``).
     """
     opt = options or InferenceOptions()
     idx = np.flatnonzero(trusted)
@@ -273,7 +276,10 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         fitted = gls.fit(m_best[0], x, y)
         rho = _ar1(y - fitted)
         if opt.noise_model == "leftover":
-            winv, noise_info = leftover_whitener(y - fitted, float(t[1] - t[0]))
+            rec = None if record_residual is None else \
+                np.asarray(record_residual, float)[i0:i1]
+            winv, noise_info = leftover_whitener(y - fitted, float(t[1] - t[0]),
+                                                 record_residual=rec)
             gls = _Gls(y, x, 0.0, winv)
         else:
             gls = _Gls(y, x, rho)

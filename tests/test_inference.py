@@ -31,8 +31,9 @@ N_COVERAGE = 30
 TWO_PI = 2.0 * math.pi
 
 
-def scenario_tracks(seed: int, n_frames: int = 2400):
-    """(times, x, y, ball, truth) of one drawn scenario at the tracks level."""
+def scenario_tracks(seed: int, n_frames: int = 2400, light_scale: float = 1.0):
+    """(times, x, y, ball, truth) of one drawn scenario at the tracks level (``light_scale``
+    multiplies the lighting shift of the ball's apparent centre)."""
     from measurement.scenario import random_scenario, simulate_scenario
     scn = random_scenario(seed, n_frames=n_frames)
     state, pos = simulate_scenario(scn)
@@ -41,7 +42,7 @@ def scenario_tracks(seed: int, n_frames: int = 2400):
     shift = np.zeros((phi.size, 2))
     for k in (1, 2, 3):     # apparent-centre shift of the lit ball, fixed lamps: f(phi)
         # amplitudes of the size measured on the rendered twin (~0.1 px, 0.003 rad on beta)
-        a, p = rng.uniform(0.02, 0.12) / k, rng.uniform(0, TWO_PI, 2)
+        a, p = light_scale * rng.uniform(0.02, 0.12) / k, rng.uniform(0, TWO_PI, 2)
         shift[:, 0] += a * np.cos(k * phi + p[0])
         shift[:, 1] += a * np.sin(k * phi + p[1])
     pts = [pos["centre"], pos["cd"], pos["ball"] + shift]
@@ -142,3 +143,25 @@ def test_slip_integration_matches_the_exact_plant(mu_d_ratio):
     np.testing.assert_allclose(disp[0, -1], true[-1], rtol=0.02)
     big = true > 0.1 * true[-1]
     np.testing.assert_allclose(disp[0][big], true[big], rtol=0.03)
+
+
+# Slow continuous onsets (issue 7): staircases through a long torque lag (>= 12 ms), mu_d / mu
+# >= 0.9 (beta leaves rest as dt^3), the stick stretch of the trusted region covering less than
+# one turn, so the slip enters ball angles whose lighting harmonic the stick never showed
+# (seeds of measurement.scenario picked by those criteria from 0..299). Before the in-window
+# harmonic refit (InferenceOptions.harmonic_orders = () then) seed 141 put its lower bound
+# 4.8 % above mu; rendered, seeds 58 and 141 of bench_coverage missed by 6.2 % and 2.5 %.
+SLOW_ONSET_SEEDS = (5, 8, 58, 118, 141, 191, 198, 286)
+
+
+def test_slow_onsets_lower_bound_stays_below_mu():
+    rows = []
+    for seed in SLOW_ONSET_SEEDS:
+        times, x, y, ball, state = scenario_tracks(seed)
+        _, s = analyse_tracks(times, x, y, l=ball.l, d=ball.d)
+        rows.append((seed, s["mu_low"], ball.mu, s["status"]))
+    print(f"\nslow onsets (staircase, lag >= 12 ms, mu_d/mu >= 0.9, < 1 turn of stick), seeds "
+          f"{SLOW_ONSET_SEEDS}: mu_low / mu - 1 = "
+          f"{[None if lo is None else round(100 * (lo / mu - 1), 1) for _, lo, mu, _ in rows]} %")
+    assert all(st == "ok" for *_, st in rows), rows
+    assert all(lo <= mu for _, lo, mu, _ in rows), rows
