@@ -1,7 +1,8 @@
 """The ``abu`` command line.
 
 Subcommands: ``build-fmus``, ``simulate``, ``table41``, ``demo`` (here) and the measurement
-commands ``track``, ``measure``, ``measure-summary``, ``render`` (:mod:`measurement.cli`).
+commands ``track``, ``measure``, ``measure-summary``, ``render`` (:mod:`measurement.cli`) and
+``calibrate-camera`` (:mod:`measurement.cli_camera`).
 
 Speeds are given in Hz on the command line (options ending ``-hz``) and converted to rad/s at
 once; everything else is SI. A user error (:class:`abu_model.errors.AbuError`) prints one line

@@ -1,5 +1,5 @@
 """Measurement commands of the ``abu`` command line: ``track``, ``measure``, ``measure-summary``,
-``render``.
+``render`` (and ``calibrate-camera``, ``measure --camera``: :mod:`measurement.cli_camera`).
 
 ``harness/cli.py`` builds the main parser and calls :func:`register`; every subcommand sets
 ``func`` (``args -> exit status``). Errors derived from :class:`abu_model.errors.AbuError` are
