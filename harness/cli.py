@@ -1,6 +1,7 @@
 """The ``abu`` command line.
 
-Subcommands: ``build-fmus``, ``simulate``, ``table41``, ``demo`` (here) and the measurement
+Subcommands: ``build-fmus``, ``simulate`` (its files and text: :mod:`harness.simulate_output`),
+``table41``, ``sweep``, ``demo`` (:mod:`harness.cli_demo`) here, and the measurement
 commands ``track``, ``measure``, ``measure-summary``, ``render`` (:mod:`measurement.cli`) and
 ``calibrate-camera`` (:mod:`measurement.cli_camera`).
 
@@ -16,7 +17,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams, DEFAULT_J_ABU, PlantParams
@@ -24,7 +25,9 @@ from abu_model.params import BallParams, DEFAULT_J_ABU, PlantParams
 from .cli_checks import (check_fmu_dir, check_ramp, check_staircase, check_sweep,
                          check_table41, check_table41_speeds)
 from .cli_common import AbuArgumentParser, add_overwrite, option_error, run_command
+from .cli_demo import cmd_demo
 from .output_tx import output_file, output_folder
+from .simulate_output import describe, tagged_summary, write_outputs  # noqa: F401 (API)
 
 HZ = 2.0 * math.pi
 
@@ -37,7 +40,6 @@ OPTION_OF = {"te": "--te", "t0": "--t0", "t_end": "--t-end", "comm_step": "--com
              "theta_ref_mode": "--theta-ref", "t_step": "--t-step", "step_hz": "--step-hz"}
 
 FMU_NAMES = ("AbuBall", "SpeedController", "Staircase")
-REPORT_BOUNDS = {"mu_low": 2.63e-3, "mu_high": 4.14e-3}  # report eq. 4.9 (thesis reading)
 
 
 def _finite(option: str, value: float) -> float:
@@ -247,52 +249,6 @@ def ramp_from_args(args: argparse.Namespace):
         raise _renamed(exc) from None
 
 
-def write_outputs(result, out: Path) -> list[Path]:
-    """result.csv, summary.json and the PNG plots of an experiment into ``out``."""
-    from .plots import plot_experiment
-    from .results_io import write_json, write_table_csv
-
-    out.mkdir(parents=True, exist_ok=True)
-    written = [write_table_csv(out / "result.csv", result.table, result.units),
-               write_json(out / "summary.json", tagged_summary(result.summary))]
-    return written + plot_experiment(result.table, result.summary, out)
-
-
-#: ``kind`` and ``format_version`` of an ``abu simulate`` summary.json (readers check them).
-SIMULATE_KIND = "abu-simulate-summary"
-SUMMARY_VERSION = 1
-
-
-def tagged_summary(summary: dict[str, Any]) -> dict[str, Any]:
-    """The summary with its ``kind`` and ``format_version`` first."""
-    return {"kind": SIMULATE_KIND, "format_version": SUMMARY_VERSION, **summary}
-
-
-def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
-    if value is None:
-        return "none"
-    return f"{value:.{digits}g}{(' ' + unit) if unit else ''}"
-
-
-def describe(summary: dict[str, Any]) -> list[str]:
-    """Human-readable lines (with units) of an experiment summary."""
-    lines = [f"true mu = {_fmt(summary['mu'])} [-]"]
-    if "mu_low" in summary:
-        lines.append(f"mu_low = {_fmt(summary['mu_low'])} [-], "
-                     f"mu_high = {_fmt(summary['mu_high'])} [-]")
-    if summary.get("mu_estimate") is not None:
-        lines.append(f"mu estimate at the slip (eq. 4.1/4.2) = {_fmt(summary['mu_estimate'], '', 7)} [-]")
-    lines.append(f"first slip at t = {_fmt(summary['t_slip'], 's', 9)}"
-                 + (f", omega = {_fmt(summary['omega_slip'], 'rad/s')}"
-                    f" ({_fmt(summary['omega_slip'] / HZ, 'Hz')}), "
-                    f"omega_dot = {_fmt(summary['alpha_slip'], 'rad/s^2')}"
-                    if summary.get("t_slip") is not None else ""))
-    if summary.get("t_restick") is not None:
-        lines.append(f"sticks again at t = {_fmt(summary['t_restick'], 's', 9)}")
-    lines.append(f"switches: {len(summary['switches'])}; {summary.get('message', '')}")
-    return lines
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .experiments import run_ramp, run_staircase
 
@@ -349,52 +305,6 @@ def cmd_table41(args: argparse.Namespace) -> int:
               f"{'' if report is None else report:>12} {checked:>8}")
     print(f"wall time {time.perf_counter() - started:.2f} s")
     return 0
-
-
-class _StepFailed(Exception):
-    """A step of the demo failed (its own message is printed): nothing is kept."""
-
-
-def cmd_demo(args: argparse.Namespace) -> int:
-    try:
-        with output_folder(Path(args.out), overwrite=args.overwrite) as tmp:
-            if _demo(tmp):
-                raise _StepFailed
-    except _StepFailed:
-        return 2
-    print(f"\nwrote everything into {args.out}")
-    return 0
-
-
-def _demo(out: Path) -> int:
-    from fmus.build import build_fmus
-
-    from .experiments import StaircaseExperiment, run_staircase
-
-    fmus = build_fmus(out / "fmus")
-    print(f"built {', '.join(p.name for p in fmus.values())}")
-    print("report sec. 4.2.3: mu = 2.75e-3, omega0 = -17 Hz -> omega_end = -22 Hz, t0 = 0 s, "
-          "te = 1 s, 1 Hz steps")
-    for mode in ("integral", "thesis"):
-        exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ, theta_ref_mode=mode)
-        result = run_staircase(exp, fmus)
-        s = result.summary
-        written = write_outputs(result, out / mode)
-        print(f"\n[{mode}] mu_low = {_fmt(s['mu_low'])} [-] <= mu = {_fmt(s['mu'])} [-] < "
-              f"mu_high = {_fmt(s['mu_high'])} [-]; first slip at t = {_fmt(s['t_slip'], 's', 6)}")
-        if mode == "thesis":
-            print(f"[{mode}] report eq. 4.9: mu_low = {REPORT_BOUNDS['mu_low']:g} [-], "
-                  f"mu_high = {REPORT_BOUNDS['mu_high']:g} [-] (differences "
-                  f"{100 * (s['mu_low'] / REPORT_BOUNDS['mu_low'] - 1):+.1f} %, "
-                  f"{100 * (s['mu_high'] / REPORT_BOUNDS['mu_high'] - 1):+.1f} %)")
-        print(f"[{mode}] wrote {len(written)} files into {mode}/")
-    print("\nmeasurement chain on the synthetic camera twin (report sec. 5.3: -9 Hz -> -19 Hz in "
-          "0.5 s, 4500 frames/s, true mu = 0.03): render, track, measure", flush=True)
-    # --quiet: render would name the run's temporary folder; the demo names the final one.
-    if main(["render", "--out", str(out / "twin"), "--quiet"]):
-        return 2
-    print("wrote the twin recording (frames.tif, truth.csv, meta.json) into twin/", flush=True)
-    return main(["measure", str(out / "twin"), "--out", str(out / "measurement")])
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

@@ -21,8 +21,7 @@ import numpy as np
 from abu_model.errors import AbuError
 
 from .design import Design, DesignSpec, design_staircase
-
-SIMULATE_KIND = "abu-simulate-summary"
+from .simulate_output import SIMULATE_KIND
 
 
 class IntervalsError(AbuError):
