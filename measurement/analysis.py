@@ -66,8 +66,8 @@ class AnalysisOptions:
     """
 
     estimator: str = "savgol"
-    sg_window_s: float = 0.036
-    sg_polyorder: int = 7
+    sg_window_s: float = 0.042
+    sg_polyorder: int = 9
     decimation: int = 10
     poly_degree: int = 10
     trim_s: float | None = None

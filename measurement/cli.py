@@ -421,8 +421,8 @@ def register(subparsers) -> None:
                    help=f"ball diameter [m] (default {DEFAULT_D:g})")
     p.add_argument("--estimator", choices=["savgol", "report"], default="savgol",
                    help="omega / omega_dot estimator (default savgol)")
-    p.add_argument("--sg-window-s", type=float, default=0.036,
-                   help="Savitzky-Golay window [s] (default 0.036, degree 7)")
+    p.add_argument("--sg-window-s", type=float, default=0.042,
+                   help="Savitzky-Golay window [s] (default 0.042, degree 9)")
     p.add_argument("--poly-degree", type=int, default=10,
                    help="degree of the report estimator's polynomial (default 10)")
     p.add_argument("--trim-s", type=float, default=None,

@@ -308,7 +308,14 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     ok = np.flatnonzero(stat <= crit)
     mu_hat = float(mu_grid[best])
     no_slip_ok = bool(mu_grid[ok[-1]] >= q_top)       # "never slips" not rejected
-    at_start_ok = bool(mu_grid[ok[0]] <= q_first)     # "slipping from the start" not rejected
+    # "slipping from the start" not rejected: the lowest accepted mu lies below the first
+    # trusted q by more than q's own kinematic noise there (within it, a candidate that "slips"
+    # from the start with mu_d ~ mu barely moves: the ball sticking at q_first, e.g. on the
+    # plateau of a first setpoint step, which the start of the trusted region may just reach)
+    a0, w0 = abs(float(omega_dot[i0])), abs(float(omega[i0]))
+    rel0 = math.hypot(float(sigma_omega_dot[i0]) / a0, 2.0 * float(sigma_omega[i0]) / w0) \
+        if a0 > 0 and w0 > 0 else 0.0
+    at_start_ok = bool(mu_grid[ok[0]] <= q_first * (1.0 - min(z * rel0, 0.05)))
     m_lo_b, m_hi_b = float(mu_grid[ok[0]]), float(mu_grid[ok[-1]])
 
     # mu_d: profile over mu on a finer ratio grid near the best mu
