@@ -294,7 +294,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     # refine: a finer mu grid around the profile's acceptance region and minimum
     for _ in range(2):
         best = int(np.argmin(rss))
-        sig2 = lrf * float(rss[best]) / max(t.size - x.shape[1] - 2, 1)
+        sig2 = max(lrf * float(rss[best]) / max(t.size - x.shape[1] - 2, 1), 1e-300)
         stat = (rss - rss[best]) / sig2
         ok = np.flatnonzero(stat <= crit)
         a = mu_grid[max(ok[0] - 1, 0)]
@@ -303,7 +303,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         mu_grid = np.unique(np.r_[mu_grid, extra])
         rss, rbest = profile(mu_grid, gls, ratios)
     best = int(np.argmin(rss))
-    sig2 = lrf * float(rss[best]) / max(t.size - x.shape[1] - 2, 1)
+    sig2 = max(lrf * float(rss[best]) / max(t.size - x.shape[1] - 2, 1), 1e-300)
     stat = (rss - rss[best]) / sig2
     ok = np.flatnonzero(stat <= crit)
     mu_hat = float(mu_grid[best])

@@ -133,7 +133,8 @@ class Gls:
         """Residual sum of squares (whitened) of y - model - nuisances for each row of model."""
         r = self.yw[None, :] - self.whiten(model)
         proj = r @ self.q
-        return np.einsum("ij,ij->i", r, r) - np.einsum("ij,ij->i", proj, proj)
+        # >= 0: on noise-free tracks the nuisance columns can fit to rounding
+        return np.maximum(np.einsum("ij,ij->i", r, r) - np.einsum("ij,ij->i", proj, proj), 0.0)
 
     def fit(self, model: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Nuisance-fitted model curve (unwhitened) for one model row."""
