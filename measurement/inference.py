@@ -62,7 +62,11 @@ class InferenceOptions:
 
     Attributes:
         confidence: level of the confidence sets [-] (default 0.95).
-        harmonic_orders: orders of the lighting harmonics in phi = theta + beta and theta.
+        harmonic_orders: orders of the lighting harmonics in phi = theta + beta (and theta)
+            refitted in the fit window and profiled out (default 1-4, the whole-record fit's:
+            that fit is unidentified where the slip carries the ball into angles its stick
+            stretch never showed, and its monotone b(t) then absorbs the error; () uses its
+            cleaned beta as is).
         theta_harmonics: also fit harmonics of theta (apparent CD-marker shift).
         n_mu, n_mu_d: grid sizes of the coarse search (refined around the bounds).
         theta_harmonic_rad: prior bound on the amplitude of a systematic first harmonic of the
