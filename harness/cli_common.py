@@ -108,6 +108,12 @@ def _u(unit: str) -> str:
 
 
 # ---------------------------------------------------------------------------- error naming
+def log(args: argparse.Namespace, message: str) -> None:
+    """A progress message on stderr, unless the command runs with ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        print(message, file=sys.stderr)
+
+
 def option_names(parser: argparse.ArgumentParser) -> set[str]:
     """Every option string (``--out``...) of ``parser``."""
     return {s for action in parser._actions for s in action.option_strings}

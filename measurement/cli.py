@@ -1,5 +1,7 @@
 """Measurement commands of the ``abu`` command line: ``track``, ``measure``, ``measure-summary``,
-``render`` (and ``calibrate-camera``, ``measure --camera``: :mod:`measurement.cli_camera`).
+``render`` (:mod:`measurement.cli_render`), and ``calibrate-camera``, ``measure --camera``
+(:mod:`measurement.cli_camera`); the printed text of the summaries is
+:mod:`measurement.summary_text`.
 
 ``harness/cli.py`` builds the main parser and calls :func:`register`; every subcommand sets
 ``func`` (``args -> exit status``). Errors derived from :class:`abu_model.errors.AbuError` are
@@ -12,23 +14,24 @@ atomically, so a failing command leaves no half-written file behind.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import AbuError, ParameterError
 from harness.cli_common import (MAX_BINS, AbuArgumentParser, add_overwrite, in_range,
-                                integer_range, option_error, run_command)
+                                integer_range, log as _log, option_error, run_command)
 from harness.output_tx import check_not_inside, output_folder
 
-from .cli_checks import check_analysis_options, check_render_options, check_tracking_options
+from .cli_checks import check_analysis_options, check_tracking_options
+from .cli_render import cmd_render
 from .input_checks import check_motion_and_roles, check_sampling
 from .json_text import dumps, json_ready  # noqa: F401  (json_ready: public name of this module)
+from .summary_text import describe_combined, describe_measurement
 
 DEFAULT_FPS = 4500.0
 #: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
@@ -57,11 +60,6 @@ def format_table_csv(table: dict[str, np.ndarray]) -> str:
     # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball;
     # non-finite values are empty cells.
     return table_csv_text(names, [np.asarray(table[n]) for n in names])
-
-
-def _log(args: argparse.Namespace, message: str) -> None:
-    if not getattr(args, "quiet", False):
-        print(message, file=sys.stderr)
 
 
 # ------------------------------------------------------------------------------ tracking
@@ -190,7 +188,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(dumps(summary))
     else:
-        print(_describe(summary))
+        print(describe_measurement(summary))
     return 0
 
 
@@ -251,44 +249,6 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
     return summary
 
 
-def _fmt(v: float | None, spec: str = ".4g") -> str:
-    return "none" if v is None else format(v, spec)
-
-
-def _describe(s: dict) -> str:
-    conf = s.get("confidence")
-    lines = [f"mu in [{_fmt(s['mu_low'])}, {_fmt(s['mu_high'])}]  ({s['status']})"
-             + (f", {100 * conf:g} % confidence" if conf is not None else "")]
-    mf, rm = s.get("model_fit"), s.get("running_max")
-    if mf and rm:
-        lines.append(f"  ball-model fit of beta: [{_fmt(mf['mu_low'])}, {_fmt(mf['mu_high'])}] "
-                     f"({mf['status']}), slip onset {_fmt(mf['t_slip'], '.4f')} s; mu_d = "
-                     f"{_fmt(s.get('mu_d'))} in [{_fmt(s.get('mu_d_low'))}, "
-                     f"{_fmt(s.get('mu_d_high'))}]; report's running max: "
-                     f"[{_fmt(rm['mu_low'])}, {_fmt(rm['mu_high'])}]")
-    lines.append(f"  t_slip_low = {_fmt(s['t_slip_low'], '.4f')} s (last surely stuck), "
-                 f"t_slip_high = {_fmt(s['t_slip_high'], '.4f')} s (first surely slipping)")
-    if s.get("relative_width") is not None:
-        lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
-    ea = s["error_analysis"]
-    lines.append(f"  report's worst case ({100 * ea['e_omega']:g} % on omega, "
-                 f"{100 * ea['e_omega_dot']:g} % on omega_dot): {100 * ea['e_mu_min']:+.1f} % / "
-                 f"{100 * ea['e_mu_max']:+.1f} % -> [{_fmt(ea['mu_low_widened'])}, "
-                 f"{_fmt(ea['mu_high_widened'])}]")
-    mc = s.get("monte_carlo")
-    if mc:
-        for key in ("mu_low", "mu_high"):
-            e = mc[key]
-            if e.get("n_defined"):
-                lines.append(f"  Monte Carlo ({mc['draws']} draws) {key}: 2.5/50/97.5 % = "
-                             f"{e['p2.5']:.4g} / {e['p50']:.4g} / {e['p97.5']:.4g}")
-    n = s["noise"]
-    lines.append(f"  noise: theta {n['sigma_theta_rad']:.2e} rad, beta {n['sigma_beta_rad']:.2e} "
-                 f"rad, omega_dot {n['sigma_omega_dot_rad_s2']:.3g} rad/s^2 (1 sigma); "
-                 f"lost frames {s['lost_frames']['any']}")
-    return "\n".join(lines)
-
-
 # ------------------------------------------------------------------------------ summary of runs
 
 def cmd_measure_summary(args: argparse.Namespace) -> int:
@@ -309,64 +269,7 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(text)
     else:
-        print(_describe_multi(result))
-    return 0
-
-
-def _describe_multi(r: dict) -> str:
-    lines = [f"{r['n_records']} intervals ({r['n_complete']} with both bounds)"]
-    u = r["union_hull"]
-    lines.append(f"  contained in at least one interval: [{_fmt(u[0])}, {_fmt(u[1])}]")
-    m = r["majority_range"]
-    lines.append(f"  contained in more than half: "
-                 f"{'none' if m is None else '[' + _fmt(m[0]) + ', ' + _fmt(m[1]) + ']'}")
-    c = r["common_range"]
-    lines.append("  contained in all: "
-                 + ("none" if c is None else f"[{_fmt(c[0])}, {_fmt(c[1])}]"))
-    t = r["turnbull"]
-    lines.append(f"  Turnbull NPMLE median in [{_fmt(t['median'][0])}, {_fmt(t['median'][1])}]")
-    return "\n".join(lines)
-
-
-# ------------------------------------------------------------------------------ render
-
-def cmd_render(args: argparse.Namespace) -> int:
-    """``abu render --out DIR``: render the digital twin of the report's experiment."""
-    check_render_options(args)
-    if getattr(args, "fmu_dir", None):
-        from harness.cli_checks import check_fmu_dir
-        check_fmu_dir("--fmu-dir", args.fmu_dir, ("AbuBall", "SpeedController", "Staircase"))
-    out = Path(args.out)
-    if getattr(args, "scenario", "report") == "random":
-        if getattr(args, "drive", None):
-            raise ParameterError("--drive", args.drive, "no --drive with --scenario random "
-                                 "(its drive is drawn at random)")
-        if args.calibration_views:
-            from .calibration_target import MAX_VIEWS
-            integer_range("--calibration-views", args.calibration_views, 1, MAX_VIEWS,
-                          "chessboard views for 'abu calibrate-camera'")
-        from .scenario import random_scenario, render_scenario
-        scn = random_scenario(args.seed, size=args.size, lighting=args.lighting,
-                              n_frames=args.frames)
-        with output_folder(out, overwrite=args.overwrite) as tmp:
-            render_scenario(tmp, scn)
-            if args.calibration_views:  # chessboard views through the same lens and sensor
-                from .calibration_target import write_views
-                write_views(tmp / "calibration", scn.optics, scn.width, scn.height,
-                            args.calibration_views, scn.seed, pixel_size_m=scn.pixel_size)
-        _log(args, f"wrote the random twin recording (seed {args.seed}, mu = {scn.ball.mu:.5g}, "
-                   f"{scn.drive.kind} drive, {scn.lighting.kind} lighting) to {out}")
-        return 0
-    if getattr(args, "calibration_views", 0):
-        raise ParameterError("--calibration-views", args.calibration_views, "0 with --scenario "
-                             "report (its lens is ideal; use --scenario random)")
-    from .twin import render_twin, twin_settings_from_args
-    from harness.cli_plan import apply_drive_to_args
-    apply_drive_to_args(args)
-    settings = twin_settings_from_args(args)
-    with output_folder(out, overwrite=args.overwrite) as tmp:
-        render_twin(tmp, settings, fmu_dir=getattr(args, "fmu_dir", None))
-    _log(args, f"wrote the twin recording to {out}")
+        print(describe_combined(result))
     return 0
 
 

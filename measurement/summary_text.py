@@ -1,0 +1,58 @@
+"""Human-readable text of the measurement summaries (what ``abu measure`` and ``abu
+measure-summary`` print); the JSON files carry the same numbers."""
+from __future__ import annotations
+
+
+def fmt_value(v: float | None, spec: str = ".4g") -> str:
+    return "none" if v is None else format(v, spec)
+
+
+def describe_measurement(s: dict) -> str:
+    """The lines ``abu measure`` prints for a summary.json (units in every line)."""
+    conf = s.get("confidence")
+    lines = [f"mu in [{fmt_value(s['mu_low'])}, {fmt_value(s['mu_high'])}]  ({s['status']})"
+             + (f", {100 * conf:g} % confidence" if conf is not None else "")]
+    mf, rm = s.get("model_fit"), s.get("running_max")
+    if mf and rm:
+        lines.append(f"  ball-model fit of beta: [{fmt_value(mf['mu_low'])}, {fmt_value(mf['mu_high'])}] "
+                     f"({mf['status']}), slip onset {fmt_value(mf['t_slip'], '.4f')} s; mu_d = "
+                     f"{fmt_value(s.get('mu_d'))} in [{fmt_value(s.get('mu_d_low'))}, "
+                     f"{fmt_value(s.get('mu_d_high'))}]; report's running max: "
+                     f"[{fmt_value(rm['mu_low'])}, {fmt_value(rm['mu_high'])}]")
+    lines.append(f"  t_slip_low = {fmt_value(s['t_slip_low'], '.4f')} s (last surely stuck), "
+                 f"t_slip_high = {fmt_value(s['t_slip_high'], '.4f')} s (first surely slipping)")
+    if s.get("relative_width") is not None:
+        lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
+    ea = s["error_analysis"]
+    lines.append(f"  report's worst case ({100 * ea['e_omega']:g} % on omega, "
+                 f"{100 * ea['e_omega_dot']:g} % on omega_dot): {100 * ea['e_mu_min']:+.1f} % / "
+                 f"{100 * ea['e_mu_max']:+.1f} % -> [{fmt_value(ea['mu_low_widened'])}, "
+                 f"{fmt_value(ea['mu_high_widened'])}]")
+    mc = s.get("monte_carlo")
+    if mc:
+        for key in ("mu_low", "mu_high"):
+            e = mc[key]
+            if e.get("n_defined"):
+                lines.append(f"  Monte Carlo ({mc['draws']} draws) {key}: 2.5/50/97.5 % = "
+                             f"{e['p2.5']:.4g} / {e['p50']:.4g} / {e['p97.5']:.4g}")
+    n = s["noise"]
+    lines.append(f"  noise: theta {n['sigma_theta_rad']:.2e} rad, beta {n['sigma_beta_rad']:.2e} "
+                 f"rad, omega_dot {n['sigma_omega_dot_rad_s2']:.3g} rad/s^2 (1 sigma); "
+                 f"lost frames {s['lost_frames']['any']}")
+    return "\n".join(lines)
+
+
+def describe_combined(r: dict) -> str:
+    """The lines ``abu measure-summary`` prints for a combined summary."""
+    lines = [f"{r['n_records']} intervals ({r['n_complete']} with both bounds)"]
+    u = r["union_hull"]
+    lines.append(f"  contained in at least one interval: [{fmt_value(u[0])}, {fmt_value(u[1])}]")
+    m = r["majority_range"]
+    lines.append(f"  contained in more than half: "
+                 f"{'none' if m is None else '[' + fmt_value(m[0]) + ', ' + fmt_value(m[1]) + ']'}")
+    c = r["common_range"]
+    lines.append("  contained in all: "
+                 + ("none" if c is None else f"[{fmt_value(c[0])}, {fmt_value(c[1])}]"))
+    t = r["turnbull"]
+    lines.append(f"  Turnbull NPMLE median in [{fmt_value(t['median'][0])}, {fmt_value(t['median'][1])}]")
+    return "\n".join(lines)
