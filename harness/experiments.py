@@ -223,7 +223,8 @@ def run_staircase(exp: StaircaseExperiment, fmu_dir: Any = None,
     them (``fmi2Reset``, see :mod:`harness.reuse`) instead of loading new ones.
     """
     fmus = ensure_fmus(fmu_dir)
-    res = run_system(exp.system(fmus), exp.t_start, exp.t_end, exp.comm_step, tol=exp.tol,
+    system = exp.system(fmus)
+    res = run_system(system, exp.t_start, exp.t_end, exp.comm_step, tol=exp.tol,
                      progress=progress, reuse=reuse)
     table = _table(res)
     switches = _switches(res, table)
@@ -233,6 +234,8 @@ def run_staircase(exp: StaircaseExperiment, fmu_dir: Any = None,
     mu = exp.plant.ball.mu
     summary: dict[str, Any] = {"experiment": exp.as_dict(), **bounds, "mu": mu,
                                "switches": switches, "slips": bounds["t_slip"] is not None}
+    # the order used, not the one asked for: FMUs without the higher inputs lower it
+    summary["experiment"]["hold_order"] = len(system.holds[0].derivatives)
     summary["end_on_setpoint_step"] = any(abs(exp.t_end - ts) <= 1e-9 for ts in step_times)
     if bounds["t_slip"] is None:
         summary["brackets_mu"] = bool(bounds["mu_low"] <= mu * (1 + BRACKET_RTOL))
