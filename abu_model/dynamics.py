@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
+from .numerics import poly_der
 from .params import BallParams, PlantParams
 
 STICK = 0
@@ -96,6 +97,20 @@ def slip_direction(plant: PlantParams, torque: float) -> int:
     return 1 if f_w > 0.0 else -1
 
 
+def _slip_gains(plant: PlantParams) -> tuple[float, float, float, float]:
+    """(a_t, a_w, b_t, b_w) of the slip equations alpha = a_t T + a_w F_w,
+    beta'' = b_t T + b_w F_w (T applied torque [N m], F_w friction force [N]); see
+    :func:`accelerations`."""
+    ball = plant.ball
+    c, M, l = ball.coupling, ball.M_bb, ball.l
+    if plant.ball_reaction:
+        J_tot = plant.J_total
+        det = J_tot * M - c * c
+        return M / det, c * l / det, -c / det, -J_tot * l / det
+    J_abu = plant.J_abu
+    return 1.0 / J_abu, 0.0, -c / (M * J_abu), -l / M
+
+
 def slip_rhs(plant: PlantParams, direction: int, torque_poly: Sequence[float]):
     """Right-hand side f(tau, y) of the slip ODE for y = [theta, omega, beta, beta', T_applied].
 
@@ -107,18 +122,10 @@ def slip_rhs(plant: PlantParams, direction: int, torque_poly: Sequence[float]):
     ball = plant.ball
     m, l, d = ball.m, ball.l, ball.d
     f_scale = ball.mu_dynamic * direction * m
-    c, M = ball.coupling, ball.M_bb
     tm = plant.tau_motor
-    if plant.ball_reaction:
-        J_tot = plant.J_total
-        det = J_tot * M - c * c
-        a_t, a_w, b_t, b_w = M / det, c * l / det, -c / det, -J_tot * l / det
-    else:
-        J_abu = plant.J_abu
-        a_t, a_w, b_t, b_w = 1.0 / J_abu, 0.0, -c / (M * J_abu), -l / M
+    a_t, a_w, b_t, b_w = _slip_gains(plant)
     # T (lag) or T' (no lag) as a polynomial in tau, evaluated by Horner in the closure
-    drive = tuple(reversed(torque_poly if tm != 0.0
-                           else [i * torque_poly[i] for i in range(1, len(torque_poly))] or [0.0]))
+    drive = tuple(reversed((torque_poly if tm != 0.0 else poly_der(torque_poly)) or [0.0]))
 
     def rhs(tau: float, y: list) -> list:
         omega, v, applied = y[1], y[3], y[4]
@@ -161,13 +168,7 @@ def alpha_taylor(plant: PlantParams, torque_derivatives: Sequence[float], applie
         return [Ta[k] / J * fact[k] for k in range(n)]
     m, l, d = ball.m, ball.l, ball.d
     f_scale = ball.mu_dynamic * mode * m
-    c, M = ball.coupling, ball.M_bb
-    if plant.ball_reaction:
-        J_tot = plant.J_total
-        det = J_tot * M - c * c
-        a_t, a_w, b_t, b_w = M / det, c * l / det, -c / det, -J_tot * l / det
-    else:
-        a_t, a_w, b_t, b_w = 1.0 / plant.J_abu, 0.0, -c / (M * plant.J_abu), -l / M
+    a_t, a_w, b_t, b_w = _slip_gains(plant)
     w, v = [omega] + [0.0] * n, [beta_dot] + [0.0] * n
     alpha = []
     for k in range(n):
