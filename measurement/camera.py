@@ -41,6 +41,12 @@ MIN_VIEWS = 4
 PRIOR_QUANTILE = 0.95
 #: Parameters whose covariance the camera file keeps.
 COV_PARAMETERS = ("cx_px", "cy_px", "k1", "k2")
+#: Largest image side [px] and view count a camera file may state (plausibility bounds).
+MAX_IMAGE_PX = 100_000
+MAX_FILE_VIEWS = 1_000_000
+#: Largest round-trip error (undistort then distort) over the image border [px]: beyond it the
+#: distortion folds over inside the image (not invertible there), e.g. a huge k1.
+ROUND_TRIP_PX = 1e-3
 
 
 class CameraError(AbuError, ValueError):
@@ -94,9 +100,15 @@ def write_camera(path: str | os.PathLike, cam: Camera) -> Path:
     return Path(path)
 
 
+def _has_bool(v: Any) -> bool:
+    return isinstance(v, bool) or (isinstance(v, list) and any(_has_bool(e) for e in v))
+
+
 def _num_array(path: str, d: dict, key: str, shape_ok, expected: str) -> np.ndarray:
     if key not in d:
         raise CameraError(f"{path}: missing field '{key}' ({expected})")
+    if _has_bool(d[key]):  # json true/false would pass as 1.0 / 0.0
+        raise CameraError(f"{path}: field '{key}' = {d[key]!r}: expected {expected}")
     try:
         a = np.asarray(d[key], dtype=float)
     except (TypeError, ValueError):
@@ -124,23 +136,26 @@ def read_camera(path: str | os.PathLike) -> Camera:
         got = d.get("kind") if isinstance(d, dict) else type(d).__name__
         raise CameraError(f"{p}: field 'kind' = {got!r}: expected '{CAMERA_KIND}' (a file of "
                           "'abu calibrate-camera')")
-    if d.get("format_version") != CAMERA_VERSION:
+    if d.get("format_version") != CAMERA_VERSION or isinstance(d.get("format_version"), bool):
         raise CameraError(f"{p}: field 'format_version' = {d.get('format_version')!r}: expected "
                           f"{CAMERA_VERSION}")
     k = _num_array(p, d, "camera_matrix", lambda a: a.shape == (3, 3),
                    "a 3x3 matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] of finite numbers")
-    if not (k[0, 0] > 0 and k[1, 1] > 0 and k[2, 2] == 1 and k[1, 0] == 0 and k[2, 0] == 0
-            and k[2, 1] == 0):
+    if not (0 < k[0, 0] <= 1e6 and 0 < k[1, 1] <= 1e6 and k[2, 2] == 1 and k[1, 0] == 0
+            and k[2, 0] == 0 and k[2, 1] == 0):
         raise CameraError(f"{p}: field 'camera_matrix' = {k.tolist()}: expected fx > 0, "
-                          "fy > 0 and the last row [0, 0, 1]")
+                          "fy > 0 (at most 1e6 px) and the last row [0, 0, 1]")
     dist = _num_array(p, d, "dist_coeffs", lambda a: a.ndim == 1 and a.size in (4, 5, 8, 12, 14),
                       "a list of 4, 5, 8, 12 or 14 finite numbers (k1, k2, p1, p2[, k3...])")
     size = _num_array(p, d, "image_size_px", lambda a: a.shape == (2,) and (a >= 1).all()
-                      and (a == np.round(a)).all(), "[width, height] in px, integers >= 1")
+                      and (a <= MAX_IMAGE_PX).all() and (a == np.round(a)).all(),
+                      f"[width, height] in px, integers in 1..{MAX_IMAGE_PX}")
     rms = _num_array(p, d, "reprojection_rms_px", lambda a: a.ndim == 0 and a >= 0,
                      "a reprojection RMS >= 0 px")
-    views = _num_array(p, d, "n_views", lambda a: a.ndim == 0 and a >= 1 and a == round(float(a)),
-                       "an integer >= 1")
+    views = _num_array(p, d, "n_views", lambda a: a.ndim == 0 and 1 <= a <= MAX_FILE_VIEWS
+                       and a == round(float(a)), f"an integer in 1..{MAX_FILE_VIEWS}")
+    corners = _num_array(p, {"n_corners": 0, **d}, "n_corners", lambda a: a.ndim == 0
+                         and 0 <= a <= 1e12 and a == round(float(a)), "an integer >= 0")
     cov = None
     cv = d.get("distortion_covariance")
     if cv is not None:
@@ -150,14 +165,37 @@ def read_camera(path: str | os.PathLike) -> Camera:
         if cv.get("parameters") != list(COV_PARAMETERS):
             raise CameraError(f"{p}: field 'distortion_covariance.parameters' = "
                               f"{cv.get('parameters')!r}: expected {list(COV_PARAMETERS)}")
-        cov = _num_array(p, cv, "matrix", lambda a: a.shape == (4, 4) and np.allclose(a, a.T)
-                         and (np.diag(a) >= 0).all(),
-                         "a symmetric 4x4 covariance of (cx, cy, k1, k2)")
+        # positive semi-definite (to rounding): a negative variance would shrink the prior
+        key = "distortion_covariance.matrix"
+        cov = _num_array(p, {key: cv["matrix"]} if "matrix" in cv else {}, key, lambda a: a.shape == (4, 4) and np.allclose(a, a.T)
+                         and np.linalg.eigvalsh(0.5 * (a + a.T)).min()
+                         >= -1e-9 * max(float(np.abs(a).max()), 1e-300),
+                         "a symmetric positive semi-definite 4x4 covariance of (cx, cy, k1, k2)")
     known = set(Camera(k, dist, (1, 1), 0.0, 1).to_dict())
-    return Camera(camera_matrix=k, dist_coeffs=dist, image_size=(int(size[0]), int(size[1])),
-                  rms_px=float(rms), n_views=int(views), n_corners=int(d.get("n_corners") or 0),
-                  covariance=cov, extra={**{a: b for a, b in d.items() if a not in known},
-                                         "path": p})
+    cam = Camera(camera_matrix=k, dist_coeffs=dist, image_size=(int(size[0]), int(size[1])),
+                 rms_px=float(rms), n_views=int(views), n_corners=int(corners),
+                 covariance=cov, extra={**{a: b for a, b in d.items() if a not in known},
+                                        "path": p})
+    err = _round_trip_px(cam)
+    if not err <= ROUND_TRIP_PX:
+        raise CameraError(f"{p}: field 'dist_coeffs' = {dist.tolist()}: expected a distortion "
+                          f"invertible over the {cam.image_size[0]}x{cam.image_size[1]} px image "
+                          f"(undistorting and distorting its border is off by {err:.3g} px)")
+    return cam
+
+
+def _round_trip_px(cam: Camera) -> float:
+    """Largest |distort(undistort(p)) - p| [px] over points p on the image border (nan if
+    not finite): where the lens model folds over, undistortion picks a wrong root."""
+    w, h = cam.image_size
+    t = np.linspace(0.0, 1.0, 33)
+    bx = np.concatenate([t * (w - 1), t * (w - 1), np.zeros_like(t), np.full_like(t, w - 1)])
+    by = np.concatenate([np.zeros_like(t), np.full_like(t, h - 1), t * (h - 1), t * (h - 1)])
+    with np.errstate(all="ignore"):
+        ux, uy = undistort_pixels(bx, by, cam)
+        dx, dy = distort_pixels(ux, uy, cam)
+        err = np.hypot(dx - bx, dy - by)
+    return float(err.max()) if np.isfinite(err).all() else math.nan
 
 
 # ------------------------------------------------------------------------------ undistortion
@@ -184,13 +222,20 @@ def undistort_pixels(x: np.ndarray, y: np.ndarray, cam: Camera) -> tuple[np.ndar
 
 
 def distort_pixels(x: np.ndarray, y: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Observed pixel positions of ideal ones (radial k1, k2 only) [px]."""
+    """Observed pixel positions of ideal ones [px]: ``cv2.projectPoints`` of the normalised
+    points, i.e. OpenCV's whole model (every coefficient of the file), the exact inverse of
+    :func:`undistort_pixels`."""
+    import cv2
+
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
     k = np.asarray(cam.camera_matrix, dtype=float)
-    dc = np.asarray(cam.dist_coeffs, dtype=float).ravel()
-    xn, yn = (np.asarray(x) - k[0, 2]) / k[0, 0], (np.asarray(y) - k[1, 2]) / k[1, 1]
-    r2 = xn * xn + yn * yn
-    g = 1.0 + dc[0] * r2 + dc[1] * r2 * r2 + (dc[4] * r2 ** 3 if dc.size > 4 else 0.0)
-    return k[0, 2] + k[0, 0] * xn * g, k[1, 2] + k[1, 1] * yn * g
+    pts = np.stack([(x.ravel() - k[0, 2]) / k[0, 0], (y.ravel() - k[1, 2]) / k[1, 1],
+                    np.ones(x.size)], axis=-1)
+    out, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), k,
+                               np.asarray(cam.dist_coeffs, dtype=float))
+    out = out.reshape(-1, 2)
+    return out[:, 0].reshape(x.shape), out[:, 1].reshape(y.shape)
 
 
 # ------------------------------------------------------------------------------ calibration

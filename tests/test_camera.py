@@ -109,6 +109,21 @@ def test_bad_camera_files_are_named(tmp_path):
         ({"image_size_px": [256]}, "'image_size_px'"),
         ({"reprojection_rms_px": -1}, "'reprojection_rms_px'"),
         ({"distortion_covariance": {"parameters": ["a"], "matrix": []}}, "parameters"),
+        # not PSD: a negative variance along (1, -1) would shrink theta's prior
+        ({"distortion_covariance": {"parameters": list(cam_mod.COV_PARAMETERS),
+                                    "matrix": (np.eye(4) + 2 * np.eye(4)[::-1]).tolist()}},
+         "'distortion_covariance.matrix'.*positive semi-definite"),
+        ({"reprojection_rms_px": float("nan")}, "'reprojection_rms_px' = nan"),
+        ({"n_corners": "many"}, "'n_corners'"),
+        ({"n_corners": 1.5}, "'n_corners'"),
+        ({"image_size_px": [True, True]}, "'image_size_px'"),
+        ({"image_size_px": [1e300, 256]}, "'image_size_px'"),
+        ({"n_views": 1e300}, "'n_views'"),
+        ({"format_version": True}, "'format_version'"),
+        ({"camera_matrix": [[1e300, 0, 128], [0, 1e300, 127], [0, 0, 1]]}, "at most 1e6"),
+        # folds over inside the image: undistortion would silently pick a wrong root
+        ({"dist_coeffs": [-3.0, 0, 0, 0, 0]}, "'dist_coeffs'.*invertible over the 256x256"),
+        ({"dist_coeffs": [1e300, 0, 0, 0, 0]}, "'dist_coeffs'.*invertible"),
     ]
     for change, needle in cases:
         bad = tmp_path / "bad.json"
@@ -116,6 +131,12 @@ def test_bad_camera_files_are_named(tmp_path):
         with pytest.raises(cam_mod.CameraError, match=needle) as info:
             cam_mod.read_camera(bad)
         assert str(bad) in str(info.value)
+    for key in ("camera_matrix", "dist_coeffs", "image_size_px", "reprojection_rms_px",
+                "n_views"):
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps({k: v for k, v in base.items() if k != key}))
+        with pytest.raises(cam_mod.CameraError, match=f"missing field '{key}'"):
+            cam_mod.read_camera(bad)
     (tmp_path / "broken.json").write_text("{not json")
     with pytest.raises(cam_mod.CameraError, match="not JSON"):
         cam_mod.read_camera(tmp_path / "broken.json")
