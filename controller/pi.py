@@ -89,6 +89,11 @@ class PISpeedController:
         """dT/dt between setpoint steps, -Kp alpha + Ki (w_ref - w) [N m/s]."""
         return -self.Kp * alpha + self.Ki * (omega_ref - omega)
 
+    def torque_derivative(self, d_k: float, d_k_minus_1: float) -> float:
+        """k-th time derivative of T between setpoint steps, k >= 2, from the rotor speed's
+        k-th and (k-1)-th derivatives: -Kp omega^(k) - Ki omega^(k-1) [N m/s^k]."""
+        return -self.Kp * d_k - self.Ki * d_k_minus_1
+
     def integral_increment(self, h: float, omega_ref: float, omega: float, alpha: float,
                            *higher: float) -> float:
         """x_I(t+h) - x_I(t) [rad] with omega(tau) = omega + alpha tau + sum_k

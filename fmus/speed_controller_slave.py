@@ -101,7 +101,7 @@ class SpeedController(Fmi2Slave):
                                     getter=self._torque_rate, **out))
         self.register_variable(Real("torque_accel", description="second time derivative of the commanded "
                                     "torque between setpoint steps, -Kp jerk - Ki alpha [N m/s2]",
-                                    getter=self._torque_accel, **out))
+                                    getter=lambda: self._torque_derivative("jerk", "alpha"), **out))
         self.register_variable(Real("x_I", description="integrator state (integral of omega_ref - omega) [rad]",
                                     getter=lambda: self.x_I, **out))
         # Registered last: the value references above stay those of earlier versions.
@@ -111,10 +111,10 @@ class SpeedController(Fmi2Slave):
                                     "integrator (fourth-order hold; 0: lower order) [rad/s5]", **inp))
         self.register_variable(Real("torque_jerk", description="third time derivative of the commanded "
                                     "torque between setpoint steps, -Kp snap - Ki jerk [N m/s3]",
-                                    getter=self._torque_jerk, **out))
+                                    getter=lambda: self._torque_derivative("snap", "jerk"), **out))
         self.register_variable(Real("torque_snap", description="fourth time derivative of the commanded "
                                     "torque between setpoint steps, -Kp crackle - Ki snap [N m/s4]",
-                                    getter=self._torque_snap, **out))
+                                    getter=lambda: self._torque_derivative("crackle", "snap"), **out))
 
     # ----------------------------------------------------------------- model
     def _build_law(self) -> PISpeedController:
@@ -148,17 +148,11 @@ class SpeedController(Fmi2Slave):
         law = self._current_law()
         return math.nan if law is None else law.torque_rate(self.omega_ref, self.omega, self.alpha)
 
-    def _torque_accel(self) -> float:
+    def _torque_derivative(self, d_k: str, d_k_minus_1: str) -> float:
+        """T^(k), k >= 2, from the inputs named d_k, d_k_minus_1 (omega^(k), omega^(k-1))."""
         law = self._current_law()
-        return math.nan if law is None else -law.Kp * self.jerk - law.Ki * self.alpha
-
-    def _torque_jerk(self) -> float:
-        law = self._current_law()
-        return math.nan if law is None else -law.Kp * self.snap - law.Ki * self.jerk
-
-    def _torque_snap(self) -> float:
-        law = self._current_law()
-        return math.nan if law is None else -law.Kp * self.crackle - law.Ki * self.snap
+        return (math.nan if law is None
+                else law.torque_derivative(getattr(self, d_k), getattr(self, d_k_minus_1)))
 
     # ----------------------------------------------------------------- FMI
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):

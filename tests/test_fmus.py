@@ -523,6 +523,27 @@ def test_bad_parameter_fails_initialization_with_a_logged_message(extracted, nam
     slave.free()
 
 
+@pytest.mark.parametrize("name, inp", [("AbuBall", "torque_jerk"), ("AbuBall", "torque_snap"),
+                                       ("SpeedController", "snap"),
+                                       ("SpeedController", "crackle")])
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_hold_input_is_an_fmi2error_naming_it(extracted, name, inp, bad):
+    """The Taylor hold's higher inputs: a non-finite value is refused at fmi2SetReal with
+    fmi2Error and a logged message naming the input; the instance keeps its last value and
+    steps on."""
+    slave = make(extracted, name)
+    slave.set(**{inp: 1.0})
+    with pytest.raises(FMICallException) as info:
+        slave.set(**{inp: bad})
+    assert info.value.status == fmi2Error
+    errors = [msg for status, msg in slave.messages if status == fmi2Error]
+    assert any(f"'{inp}' = {bad!r}" in msg and name in msg for msg in errors), slave.messages
+    assert slave.get(inp) == 1.0
+    slave.step(1e-3)
+    assert all(math.isfinite(v) for v in slave.outputs().values() if isinstance(v, float))
+    slave.free()
+
+
 FREE_AFTER_FAILURE = textwrap.dedent("""
     import gc, json, sys
     from fmpy import extract, read_model_description
