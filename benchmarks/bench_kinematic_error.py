@@ -44,7 +44,8 @@ from measurement.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.slip_model import signed_mu_req  # noqa: E402
 from test_inference import scenario_tracks  # noqa: E402
 from measurement.calibration_target import render_views  # noqa: E402
-from measurement.camera import calibrate_from_frames, write_camera  # noqa: E402
+from measurement.camera import write_camera  # noqa: E402
+from measurement.camera_calibration import calibrate_from_frames  # noqa: E402
 from measurement.cli_camera import apply_camera  # noqa: E402
 from measurement.scenario import random_scenario  # noqa: E402
 

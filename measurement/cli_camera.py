@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +23,7 @@ from harness.cli_common import add_overwrite, in_range
 from harness.output_tx import output_file
 
 from . import camera as cam_mod
+from . import camera_calibration as calib
 
 
 def cmd_calibrate_camera(args: argparse.Namespace) -> int:
@@ -31,15 +31,15 @@ def cmd_calibrate_camera(args: argparse.Namespace) -> int:
     from .frames_io import read_recording
     from .json_text import dumps
 
-    pattern = cam_mod.parse_pattern(args.pattern)
+    pattern = calib.parse_pattern(args.pattern)
     focal = None if args.focal_px is None else in_range(
         "--focal-px", args.focal_px, 1.0, 1e6, "px", "the fixed focal length (any fixed value "
         "gives the same undistortion; default the half diagonal)")
     square = in_range("--square", args.square, 1e-9, 1e9, "", "the side of a square (any unit)")
     rec = read_recording(args.views)
     names = rec.frame_names or [f"{rec.source} frame {i}" for i in range(len(rec))]
-    cam, rows = cam_mod.calibrate_from_frames(np.asarray(rec.frames), pattern, focal_px=focal,
-                                              square=square, names=names)
+    cam, rows = calib.calibrate_from_frames(np.asarray(rec.frames), pattern, focal_px=focal,
+                                            square=square, names=names)
     cam.extra["source"] = rec.source
     with output_file(args.out, overwrite=args.overwrite) as tmp:
         cam_mod.write_camera(tmp, cam)

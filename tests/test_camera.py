@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from measurement import camera as cam_mod
+from measurement import camera_calibration as calib
 from measurement.calibration_target import render_views, undistort_map
 from measurement.cli import main
 from measurement.optics import OpticsSpec, distort, half_diagonal
@@ -69,7 +70,7 @@ def test_calibration_recovers_the_lens_on_random_optics():
         scn = random_scenario(seed)
         o = scn.optics
         frames, corners, _ = render_views(o, scn.width, scn.height, VIEWS, seed)
-        cam, views = cam_mod.calibrate_from_frames(frames, (9, 6))
+        cam, views = calib.calibrate_from_frames(frames, (9, 6))
         k = cam.camera_matrix
         err = np.array([k[0, 2] - o.optical_centre[0], k[1, 2] - o.optical_centre[1],
                         cam.dist_coeffs[0] - o.k1, cam.dist_coeffs[1] - o.k2])
@@ -153,7 +154,7 @@ def test_too_few_corners_is_refused(tmp_path, capsys):
     for i in range(5):
         cv2.imwrite(str(views / f"v{i}.png"), np.full((120, 160), 128, np.uint8))
     with pytest.raises(cam_mod.CameraError, match="found whole in 0 of 5 views"):
-        cam_mod.calibrate_from_frames(np.full((5, 120, 160), 128, np.uint8), (9, 6))
+        calib.calibrate_from_frames(np.full((5, 120, 160), 128, np.uint8), (9, 6))
     out = tmp_path / "cam.json"
     assert main(["calibrate-camera", str(views), "--out", str(out)]) == 2
     assert "at least 4 are needed" in capsys.readouterr().err
