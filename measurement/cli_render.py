@@ -26,7 +26,8 @@ def cmd_render(args: argparse.Namespace) -> int:
                                  "(its drive is drawn at random)")
         if args.calibration_views:
             from .calibration_target import MAX_VIEWS
-            integer_range("--calibration-views", args.calibration_views, 1, MAX_VIEWS,
+            from .camera_calibration import MIN_VIEWS  # fewer: calibrate-camera refuses them
+            integer_range("--calibration-views", args.calibration_views, MIN_VIEWS, MAX_VIEWS,
                           "chessboard views for 'abu calibrate-camera'")
         from .scenario import random_scenario, render_scenario
         scn = random_scenario(args.seed, size=args.size, lighting=args.lighting,

@@ -238,3 +238,8 @@ def test_camera_of_another_frame_size_is_refused(rendered, tmp_path, capsys):
     assert "--camera" in err and "200x200" in err and not out.exists()
     assert main(["render", "--calibration-views", "5", "--out", str(tmp_path / "r")]) == 2
     assert "--calibration-views" in capsys.readouterr().err
+    # fewer views than calibrate-camera needs, or more than the bound: refused before rendering
+    for bad in ("3", "-1", "101"):
+        assert main(["render", "--scenario", "random", "--calibration-views", bad, "--out",
+                     str(tmp_path / "r")]) == 2
+        assert "--calibration-views" in capsys.readouterr().err and not (tmp_path / "r").exists()
