@@ -165,7 +165,8 @@ def read_camera(path: str | os.PathLike) -> Camera:
                               f"{cv.get('parameters')!r}: expected {list(COV_PARAMETERS)}")
         # positive semi-definite (to rounding): a negative variance would shrink the prior
         key = "distortion_covariance.matrix"
-        cov = _num_array(p, {key: cv["matrix"]} if "matrix" in cv else {}, key, lambda a: a.shape == (4, 4) and np.allclose(a, a.T)
+        cov = _num_array(p, {key: cv["matrix"]} if "matrix" in cv else {}, key,
+                         lambda a: a.shape == (4, 4) and np.allclose(a, a.T)
                          and np.linalg.eigvalsh(0.5 * (a + a.T)).min()
                          >= -1e-9 * max(float(np.abs(a).max()), 1e-300),
                          "a symmetric positive semi-definite 4x4 covariance of (cx, cy, k1, k2)")

@@ -360,8 +360,8 @@ def add_render_arguments(p: argparse.ArgumentParser) -> None:
                         "reflections on the ball; default: drawn, 25 %% two_spot)")
     p.add_argument("--calibration-views", type=int, default=0,
                    help="--scenario random: also write K chessboard views through the same lens "
-                        "and sensor into calibration/ (for 'abu calibrate-camera': 4..100; default 0; "
-                        "the benchmark uses 30)")
+                        "and sensor into calibration/ (for 'abu calibrate-camera': 4..100; "
+                        "default 0; the benchmark uses 30)")
 
 
 def twin_settings_from_args(args: argparse.Namespace) -> TwinSettings:
