@@ -111,6 +111,36 @@ class PlantOutputs:
     mu_req: float          #: (l - d/5)|alpha| / (l omega^2) [-]
 
 
+def _fall_through_zero(slope, lo: float, hi: float, lo_is_zero: bool,
+                       hi_is_zero: bool) -> float | None:
+    """The u in (lo, hi) where ``slope`` falls through 0 if it is > 0 next to lo and < 0 next
+    to hi, else None (one maximum per piece). At an end that is a zero of alpha (``lo_is_zero``,
+    ``hi_is_zero``; slope 0 there up to the root's rounding), or where slope is 0 at lo, the
+    side's sign is taken by halving towards that end; at hi only for a zero of alpha (a slope
+    that is 0 along the whole step is no maximum)."""
+    def near(end: float, other: float, sign: float) -> tuple[float, float] | None:
+        x = other
+        for _ in range(60):
+            x = end + 0.5 * (x - end)
+            d = slope(x)
+            if sign * d > 0.0:
+                return x, d
+        return None
+
+    if hi_is_zero:
+        right = near(hi, lo, -1.0)
+    else:
+        d_hi = slope(hi)
+        right = (hi, d_hi) if d_hi < 0.0 else None
+    if right is None:
+        return None
+    d_lo = 0.0 if lo_is_zero else slope(lo)
+    left = (lo, d_lo) if d_lo > 0.0 else near(lo, right[0], 1.0) if d_lo == 0.0 else None
+    if left is None:
+        return None
+    return brent_root(slope, left[0], right[0], left[1], right[1])
+
+
 class AbuPlant:
     """Rotor + one ball, advanced step by step with exact stick/slip switches.
 
@@ -243,7 +273,8 @@ class AbuPlant:
 
         alpha, alpha_rate (= d alpha/du), omega: functions of u [rad/s^2, rad/s^3, rad/s].
         d(mu_req)/du has the sign of D = alpha (alpha' omega - 2 alpha^2) omega; a maximum
-        inside is a fall of D through 0, looked for only where D falls between the ends.
+        inside is a fall of D through 0, looked for where D falls between the ends of each
+        side of a zero of alpha (mu_req rises again after such a minimum).
         """
         k = self.params.ball.lever_ratio
 
@@ -256,23 +287,16 @@ class AbuPlant:
             return a * (alpha_rate(u) * w - 2.0 * a * a) * w
 
         peak = max(self.step_peak, mu_req(0.0), mu_req(u_end))
-        d1 = slope(u_end) if u_end > 0.0 else 0.0
-        if d1 < 0.0:
-            lo, d_lo = 0.0, slope(0.0)
+        if u_end > 0.0:
+            ends = [0.0, u_end]
             a0, a1 = alpha(0.0), alpha(u_end)
             if (a0 < 0.0) != (a1 < 0.0) and a0 != 0.0 and a1 != 0.0:
-                # |alpha| passes through 0 (a minimum of mu_req): a maximum can only follow
-                lo, d_lo = brent_root(alpha, 0.0, u_end, a0, a1), 0.0
-            if d_lo == 0.0:  # alpha = 0 at lo: D first rises from 0 if a maximum follows
-                x = u_end
-                for _ in range(60):
-                    x = lo + 0.5 * (x - lo)
-                    d_x = slope(x)
-                    if d_x > 0.0:
-                        lo, d_lo = x, d_x
-                        break
-            if d_lo > 0.0:
-                peak = max(peak, mu_req(brent_root(slope, lo, u_end, d_lo, d1)))
+                # |alpha| passes through 0 (mu_req = 0, a minimum): a maximum on either side
+                ends.insert(1, brent_root(alpha, 0.0, u_end, a0, a1))
+            for i in range(len(ends) - 1):
+                u = _fall_through_zero(slope, ends[i], ends[i + 1], i > 0, i + 2 < len(ends))
+                if u is not None:
+                    peak = max(peak, mu_req(u))
         self.step_peak = peak
 
     def _advance_stick_polynomial(self, tau0: float, h: float, c: list[float]) -> float | None:

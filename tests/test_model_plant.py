@@ -283,6 +283,28 @@ def test_step_peak_with_a_motor_lag_matches_a_bounded_maximiser():
     assert plant.step_peak == pytest.approx(-best.fun, rel=1e-12)
 
 
+def test_step_peak_before_alpha_changes_sign_inside_the_step():
+    """alpha = A (1 - u/u0) falls through 0 inside the step while |omega| shrinks faster:
+    mu_req rises to a maximum before u0, drops to 0 there and rises again; the maximum
+    before the zero of alpha is the step's peak (scipy's bounded maximiser on the closed
+    form; a search over the whole step only, by the sign of d(mu_req)/dt at its ends, missed
+    it by 23 %)."""
+    from scipy.optimize import minimize_scalar
+
+    params = PlantParams(ball=BallParams(mu=50.0))
+    J, k = params.J_total, params.ball.lever_ratio
+    w0, A, u0, h = -100.0, 4000.0, 0.025, 0.03
+
+    def mu_req(u):
+        return k * abs(A * (1.0 - u / u0)) / (w0 + A * (u - u * u / (2.0 * u0))) ** 2
+    best = minimize_scalar(lambda u: -mu_req(u), bounds=(0.0, u0), method="bounded",
+                           options={"xatol": 1e-12})
+    assert max(mu_req(0.0), mu_req(h)) < -best.fun * (1 - 1e-2)
+    plant = AbuPlant(params, omega0=w0)
+    assert not plant.advance(h, J * A, -J * A / u0)  # stuck throughout
+    assert plant.step_peak == pytest.approx(-best.fun, rel=1e-10)
+
+
 def test_monolithic_reference_finds_the_same_peak_between_its_points():
     params = PlantParams(ball=BallParams(mu=0.03))
     w0, K = 100.0, 3000.0
