@@ -123,6 +123,12 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
                                      trim_s=0.05 if opt.trim_s is None else opt.trim_s)
 
 
+def circle_centre(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Centre of the least-squares circle through the points (x, y) [px] (algebraic, Kasa)."""
+    sol = np.linalg.lstsq(np.column_stack([x, y, np.ones_like(x)]), x ** 2 + y ** 2, rcond=None)[0]
+    return 0.5 * float(sol[0]), 0.5 * float(sol[1])
+
+
 def fixed_axis(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates with the centre marker replaced by the fixed ABU axis [px].
 
@@ -137,9 +143,7 @@ def fixed_axis(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     xc, yc = x[:, 1], y[:, 1]
     ang = np.unwrap(np.arctan2(-(yc - y[:, 0]), xc - x[:, 0]))
     if float(np.ptp(ang)) > np.pi:
-        a = np.column_stack([xc, yc, np.ones_like(xc)])
-        sol = np.linalg.lstsq(a, xc ** 2 + yc ** 2, rcond=None)[0]
-        cx, cy = 0.5 * sol[0], 0.5 * sol[1]
+        cx, cy = circle_centre(xc, yc)
     else:
         cx, cy = float(np.mean(x[:, 0])), float(np.mean(y[:, 0]))
     x[:, 0], y[:, 0] = cx, cy

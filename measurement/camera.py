@@ -245,15 +245,15 @@ def _theta_harmonics(cam: Camera, params: np.ndarray, phi: np.ndarray, ideal: np
     """(a1s, a1c, a2s, a2c) of the theta error [rad] on the CD circle when observed points
     (distorted by ``cam``) are undistorted with (cx, cy, k1, k2) = ``params``; the axis is
     re-fitted as a circle centre, as the analysis does."""
+    from .analysis import circle_centre
+
     k = np.array(cam.camera_matrix, float)
     k[0, 2], k[1, 2] = params[0], params[1]
     dc = np.array(cam.dist_coeffs, float).ravel()
     dc[0], dc[1] = params[2], params[3]
     obs = np.stack(distort_pixels(ideal[:, 0], ideal[:, 1], cam), axis=-1)
     ux, uy = undistort_pixels(obs[:, 0], obs[:, 1], Camera(k, dc, cam.image_size, 0.0, 1))
-    a = np.column_stack([ux, uy, np.ones_like(ux)])
-    sol = np.linalg.lstsq(a, ux ** 2 + uy ** 2, rcond=None)[0]
-    cx, cy = 0.5 * sol[0], 0.5 * sol[1]
+    cx, cy = circle_centre(ux, uy)
     th = np.unwrap(np.arctan2(-(uy - cy), ux - cx))
     err = th - phi
     design = np.column_stack([np.ones_like(phi), np.sin(phi), np.cos(phi), np.sin(2 * phi),
