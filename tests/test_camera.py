@@ -166,6 +166,24 @@ def test_too_few_corners_is_refused(tmp_path, capsys):
     # the plate has 9x6 inner corners: asking for 8x5 finds a different grid or none
     assert main(["calibrate-camera", str(views), "--pattern", "11x7", "--out", str(out)]) == 2
     assert not out.exists() and not list(tmp_path.glob(".cam.json*"))
+    # colour views, a file that is no recording, an unreadable image: named, exit 2, no file
+    colour = tmp_path / "colour"
+    colour.mkdir()
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(colour / f"v{i}.png"), cv2.cvtColor(f, cv2.COLOR_GRAY2BGR))
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not images")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "v0.png").write_text("not a PNG")
+    for src, needle in ((colour, "colour"), (notes, "notes.txt"), (broken, "v0.png")):
+        capsys.readouterr()
+        assert main(["calibrate-camera", str(src), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and "Traceback" not in err, err
+    assert not out.exists()
+    with pytest.raises(cam_mod.CameraError, match="8-bit grey"):
+        calib.calibrate_from_frames(np.stack([frames] * 3, axis=-1), (9, 6))
 
 
 @pytest.fixture(scope="module")
