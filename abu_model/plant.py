@@ -276,11 +276,10 @@ class AbuPlant:
         inside is a fall of D through 0, looked for where D falls between the ends of each
         side of a zero of alpha (mu_req rises again after such a minimum).
         """
-        k = self.params.ball.lever_ratio
+        ball = self.params.ball
 
-        def mu_req(u: float) -> float:
-            w = omega(u)
-            return k * abs(alpha(u)) / (w * w) if w != 0.0 else math.inf
+        def mu_req(u: float) -> float:  # 0, not inf, at rest with alpha = 0 (the output's rule)
+            return mu_required(ball, alpha(u), omega(u))
 
         def slope(u: float) -> float:
             a, w = alpha(u), omega(u)

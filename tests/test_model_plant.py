@@ -305,6 +305,15 @@ def test_step_peak_before_alpha_changes_sign_inside_the_step():
     assert plant.step_peak == pytest.approx(-best.fun, rel=1e-10)
 
 
+@pytest.mark.parametrize("tau_motor", [0.0, 0.01])
+def test_step_peak_at_rest_without_torque_is_zero_like_mu_req(tau_motor):
+    """omega = 0, alpha = 0: the ball sticks and mu_req is 0 (dynamics.mu_required), so is
+    the step's peak (it was inf, which an FMU state holding it could not restore)."""
+    plant = AbuPlant(PlantParams(tau_motor=tau_motor), omega0=0.0)
+    assert not plant.advance(0.01, 0.0, 0.0)
+    assert plant.step_peak == 0.0 == plant.outputs(0.0).mu_req
+
+
 def test_monolithic_reference_finds_the_same_peak_between_its_points():
     params = PlantParams(ball=BallParams(mu=0.03))
     w0, K = 100.0, 3000.0
