@@ -160,5 +160,11 @@ def _covariance(obj, img_pts, kk, dist, rvecs, tvecs) -> np.ndarray:
         big[j * m:(j + 1) * m, 4 + 6 * j:10 + 6 * j] = pose
     r = np.concatenate(res)
     sigma2 = float(r @ r) / max(r.size - big.shape[1], 1)
-    cov = sigma2 * np.linalg.inv(big.T @ big)[:4, :4]  # J^T J is positive definite
+    try:  # J^T J is positive definite unless the views leave a lens parameter free
+        cov = sigma2 * np.linalg.inv(big.T @ big)[:4, :4]
+    except np.linalg.LinAlgError:
+        cov = np.full((4, 4), np.nan)
+    if not (np.isfinite(cov).all() and (np.diag(cov) >= 0).all()):
+        raise CameraError("the calibration views do not tie down the lens (singular "
+                          "Jacobian of (cx, cy, k1, k2)): use views spread over the field")
     return 0.5 * (cov + cov.T)

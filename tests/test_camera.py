@@ -261,3 +261,13 @@ def test_camera_of_another_frame_size_is_refused(rendered, tmp_path, capsys):
         assert main(["render", "--scenario", "random", "--calibration-views", bad, "--out",
                      str(tmp_path / "r")]) == 2
         assert "--calibration-views" in capsys.readouterr().err and not (tmp_path / "r").exists()
+
+
+def test_views_that_leave_the_lens_free_are_refused():
+    """A singular Jacobian (every corner on the principal point: nothing ties down the lens)
+    is a CameraError, not a LinAlgError traceback or a covariance of inf / nan."""
+    obj = np.zeros((54, 3), np.float32)
+    kk = np.array([[181.0, 0, 128], [0, 181.0, 127], [0, 0, 1]])
+    with pytest.raises(cam_mod.CameraError, match="do not tie down the lens"):
+        calib._covariance(obj, [np.full((54, 1, 2), 128, np.float32)], kk, np.zeros(5),
+                          [np.zeros(3)], [np.array([0, 0, 10.0])])
