@@ -77,9 +77,10 @@ def friction_bounds(table: Mapping[str, np.ndarray], switches: list[dict[str, An
     mu_low is the largest mu_req before the first stick -> slip switch, including the left
     limit at the slip instant, and between communication points: a row's ``mu_req_peak`` (if
     recorded) is the largest mu_req in stick over the step that ended at it, so mu_low is the
-    supremum over the stick period, not a maximum over sample points; mu_high is mu_req at the right limit there (the last row
-    at that time). If alpha is continuous at the slip, both equal mu. Without a slip,
-    mu_high and t_slip are None and mu_low is the largest mu_req of the whole (stuck) run.
+    supremum over the stick period, not a maximum over sample points; mu_high is mu_req at
+    the right limit there (the last row at that time). If alpha is continuous at the slip,
+    both equal mu. Without a slip, mu_high and t_slip are None and mu_low is the largest
+    mu_req of the whole (stuck) run.
     A slip at or before ``first_step`` [s] (the first setpoint step) leaves no stick period
     with an acceleration: mu_low is None (there is no lower bound).
     """
