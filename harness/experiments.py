@@ -117,7 +117,9 @@ class StaircaseExperiment:
     def __post_init__(self) -> None:
         if not isinstance(self.plant, PlantParams):
             raise ParameterError("plant", self.plant, "a PlantParams instance")
-        if self.hold_order is not None and self.hold_order not in (1, 2, 3, 4):
+        if self.hold_order is not None and (type(self.hold_order) is not int
+                                            or self.hold_order not in (1, 2, 3, 4)):
+            # an int (2.0 or True would pass the range test and fail as an index later)
             raise ParameterError("hold_order", self.hold_order, "1, 2, 3 or 4 (or None)")
         for name in ("omega0", "omega_end", "t0", "te", "step", "zeta", "omega_n", "beta0"):
             object.__setattr__(self, name, check_finite(name, getattr(self, name)))
@@ -162,8 +164,7 @@ class StaircaseExperiment:
         plant = _plant_parameters(self.plant)
         plant.update(theta0=self.omega0 * self.t_start, omega0=self.omega0, beta0=self.beta0,
                      beta_dot0=0.0)
-        order = max(1, min(HOLD_ORDER if self.hold_order is None else self.hold_order,
-                           len(_TORQUE_DERIVATIVES) - 1))
+        order = HOLD_ORDER if self.hold_order is None else self.hold_order  # 1..4, checked
         while order > 1 and not (_has_input(fmus["AbuBall"], _TORQUE_DERIVATIVES[order])
                                  and _has_input(fmus["SpeedController"],
                                                 _ALPHA_DERIVATIVES[order - 1])):

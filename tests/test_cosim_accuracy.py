@@ -184,8 +184,9 @@ def test_lower_order_holds_still_work_and_the_order_pays(fmu_dir):
         assert s["t_slip"] == pytest.approx(ref.t_slip, abs=1e-12)
         steps[order] = s["cosim"]["steps"]
     assert steps[2] > 3 * steps[3] and steps[3] > steps[4], steps
-    with pytest.raises(ParameterError, match="hold_order"):
-        StaircaseExperiment(PlantParams(), hold_order=5, **REPORT)
+    for bad in (5, 0, 2.0, True, "2"):
+        with pytest.raises(ParameterError, match="hold_order"):
+            StaircaseExperiment(PlantParams(), hold_order=bad, **REPORT)
 
 
 def test_fixed_step_mode_stays_available(fmu_dir):
