@@ -367,3 +367,32 @@ def test_alpha_derivatives_in_slip_match_the_integrated_trajectory(tau_motor, re
     assert p0.outputs(d[0]).alpha == pytest.approx(derivs[0], rel=1e-14)
     assert derivs[1] == pytest.approx(d1, rel=1e-6)
     assert derivs[2] == pytest.approx(d2, rel=1e-3)
+
+
+@pytest.mark.parametrize("tau_motor, reaction", [(0.0, False), (0.004, True)])
+def test_alpha_third_derivative_in_slip_is_the_rate_of_the_second(tau_motor, reaction):
+    """d3(alpha)/dt3 (the FMU's crackle) in slip: the 5-point difference of the exact
+    d2(alpha)/dt2 along the plant's own integrated trajectory, the torque's derivatives
+    carried along the held Taylor polynomial."""
+    params = PlantParams(ball=BallParams(mu=2e-3), tau_motor=tau_motor, ball_reaction=reaction)
+    J = params.J_total
+    d = [J * -40.0, J * -900.0, J * 6000.0, J * 1e4, J * -3e5]
+
+    def plant():
+        return AbuPlant(params, omega0=-100.0, torque0=1e-3, beta_dot0=5.0, t0=-1.0)
+
+    def shifted(tau):  # T^(k)(tau) of the held polynomial
+        return [sum(d[k + j] * tau**j / math.factorial(j) for j in range(len(d) - k))
+                for k in range(len(d))]
+
+    e0 = 1e-4
+    third = plant().alpha_derivatives(d, 3)[3]
+    v = []
+    for i in range(5):
+        p = plant()
+        if i:
+            p.advance(i * e0, *d)
+        assert p.state.mode != 0  # still slipping
+        v.append(p.alpha_derivatives(shifted(i * e0), 2)[2])
+    rate = (-25 * v[0] + 48 * v[1] - 36 * v[2] + 16 * v[3] - 3 * v[4]) / (12 * e0)
+    assert third == pytest.approx(rate, rel=1e-5)
