@@ -488,6 +488,34 @@ def test_speed_controller_and_staircase_rollback_is_bit_identical(extracted):
     ctrl.free(), stairs.free()
 
 
+def test_mu_req_peak_is_the_maximum_inside_the_step_and_travels_with_the_state(extracted):
+    """alpha = K t from rest at omega0 (torque ramp, first-order hold): mu_req = k K t /
+    (w0 + K t^2/2)^2 peaks at t* = sqrt(2 w0 / (3 K)) inside the step (closed form); the
+    output is that peak, the saved FMU state restores it after a further step."""
+    from abu_model.params import BallParams, PlantParams
+
+    params = PlantParams(ball=BallParams(mu=0.03))
+    w0, K, h = 100.0, 3000.0, 0.5
+    k, J = params.ball.lever_ratio, params.J_total
+    t_star = math.sqrt(2.0 * w0 / (3.0 * K))
+    peak = k * K * t_star / (w0 + K * t_star**2 / 2.0) ** 2
+    slave = make(extracted, "AbuBall", omega0=w0, mu=0.03)
+    assert slave.get("mu_req_peak") == 0.0  # no step yet
+    slave.set(torque=0.0, torque_rate=J * K)
+    slave.step(h)
+    assert slave.get("mode") == 0 and slave.get("step_switches") == 0
+    assert slave.get("mu_req_peak") == pytest.approx(peak, rel=1e-12)
+    assert slave.get("mu_req") < peak * (1 - 1e-3)  # the end point alone misses it
+    state = slave.fmu.getFMUstate()
+    slave.set(torque=J * K * h, torque_rate=0.0)  # constant torque: mu_req falls
+    slave.step(h)
+    assert slave.get("mu_req_peak") < peak * (1 - 1e-3)
+    slave.fmu.setFMUstate(state)
+    assert slave.get("mu_req_peak") == pytest.approx(peak, rel=1e-12)
+    slave.fmu.freeFMUstate(state)
+    slave.free()
+
+
 # --------------------------------------------------------------------------- bad parameters
 @pytest.mark.parametrize("name, values, parameter", [
     ("AbuBall", {"m": -1.4e-4}, "m"),
