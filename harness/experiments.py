@@ -23,6 +23,7 @@ from .bounds import (BRACKET_RTOL, SUMMARY_UNITS, UNITS, ExperimentResult,  # no
                      _finish_summary, _switches, _table, friction_bounds)
 from .fmu_files import FMU_FILES, ensure_fmus  # noqa: F401
 from .fmu_files import has_input as _has_input
+from .fmu_files import has_output as _has_output
 from .reuse import run_system
 from .system import Component, Connection, Hold, Source, System
 
@@ -37,6 +38,15 @@ _PLANT_PROBES = {
     "friction_force": "plant.friction_force", "mu_req": "plant.mu_req", "mode": "plant.mode",
     "torque_applied": "plant.torque_applied", "mu_req_peak": "plant.mu_req_peak",
 }
+#: Plant outputs newer than the first interface: probed only if the AbuBall file has them
+#: (without ``mu_req_peak`` the bounds fall back to mu_req at the communication points).
+_OPTIONAL_PLANT_PROBES = ("mu_req_peak",)
+
+
+def _plant_probes(plant_fmu: Path) -> dict[str, str]:
+    """The plant's probes that the AbuBall file ``plant_fmu`` can answer."""
+    return {key: ref for key, ref in _PLANT_PROBES.items()
+            if key not in _OPTIONAL_PLANT_PROBES or _has_output(plant_fmu, key)}
 #: The plant's inputs T, T', T'', ... and outputs alpha, alpha', alpha'', ... of a Taylor
 #: hold (the SpeedController has the same names the other way round).
 _TORQUE_DERIVATIVES = ("torque", "torque_rate", "torque_accel", "torque_jerk", "torque_snap")
@@ -197,7 +207,8 @@ class StaircaseExperiment:
                 Connection("ctrl.torque", "plant.torque"),
                 Connection("ctrl.torque_rate", "plant.torque_rate"),
             ) + extra,
-            probes={"omega_ref": "ref.omega_ref", "torque": "ctrl.torque", **_PLANT_PROBES},
+            probes={"omega_ref": "ref.omega_ref", "torque": "ctrl.torque",
+                    **_plant_probes(fmus["AbuBall"])},
             holds=holds,
         )
 
@@ -324,7 +335,7 @@ class RampExperiment:
             components=(Component("plant", fmus["AbuBall"], plant),),
             sources=(Source("plant.torque", lambda t: slope * t),
                      Source("plant.torque_rate", lambda t: slope)),
-            probes={"torque": "plant.torque", **_PLANT_PROBES})
+            probes={"torque": "plant.torque", **_plant_probes(fmus["AbuBall"])})
 
     def as_dict(self) -> dict[str, Any]:
         b = self.plant.ball

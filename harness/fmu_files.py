@@ -1,5 +1,6 @@
 """The toolkit's FMU files for the experiments: built once per process or taken from a
-folder (:func:`ensure_fmus`), and which inputs a file has (:func:`has_input`)."""
+folder (:func:`ensure_fmus`), and which inputs and outputs a file has (:func:`has_input`,
+:func:`has_output`: FMUs of an older interface lack the newer variables)."""
 from __future__ import annotations
 
 import tempfile
@@ -47,16 +48,26 @@ def ensure_fmus(fmu_dir: str | Path | Mapping[str, Path] | None = None) -> dict[
     return paths
 
 
-_INPUTS_OF: dict[tuple[str, int], frozenset[str]] = {}
+_CAUSALITIES: dict[tuple[str, int], dict[str, str]] = {}
 
 
-def has_input(fmu: Path, name: str) -> bool:
-    """True if the FMU file has an input variable ``name`` (read once per file version)."""
+def _causalities(fmu: Path) -> dict[str, str]:
+    """Variable name -> causality of an FMU file (its modelDescription read once per version)."""
     import fmpy
 
     path = Path(fmu)
     key = (str(path.resolve()), path.stat().st_mtime_ns)
-    if key not in _INPUTS_OF:
+    if key not in _CAUSALITIES:
         md = fmpy.read_model_description(str(path), validate=False)
-        _INPUTS_OF[key] = frozenset(v.name for v in md.modelVariables if v.causality == "input")
-    return name in _INPUTS_OF[key]
+        _CAUSALITIES[key] = {v.name: v.causality for v in md.modelVariables}
+    return _CAUSALITIES[key]
+
+
+def has_input(fmu: Path, name: str) -> bool:
+    """True if the FMU file has an input variable ``name``."""
+    return _causalities(fmu).get(name) == "input"
+
+
+def has_output(fmu: Path, name: str) -> bool:
+    """True if the FMU file has an output variable ``name``."""
+    return _causalities(fmu).get(name) == "output"

@@ -4,6 +4,7 @@ slip root of the prescribed ramp, and the closed-form acceleration jump of the P
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -235,3 +236,57 @@ def test_ramp_parameters_are_validated(changes, parameter):
     with pytest.raises(ParameterError) as err:
         RampExperiment(PlantParams(), **args)
     assert err.value.parameter == parameter
+
+
+# Variables added to the FMUs' interface by the fourth-order hold (registered last, so the
+# older files are these files with them cut from the modelDescription).
+_NEWER_VARIABLES = {"AbuBall": {"torque_jerk", "torque_snap", "snap", "crackle", "mu_req_peak"},
+                    "SpeedController": {"snap", "crackle", "torque_jerk", "torque_snap"}}
+
+
+def _older_interface(fmu: Path, drop: set[str], dest: Path) -> Path:
+    """A copy of ``fmu`` whose modelDescription lacks the variables ``drop`` (and their
+    ModelStructure entries): what a host sees of an FMU built before they existed."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    with zipfile.ZipFile(fmu) as src:
+        root = ET.fromstring(src.read("modelDescription.xml"))
+        members = {name: src.read(name) for name in src.namelist()}
+    variables = root.find("ModelVariables")
+    all_vars = list(variables)
+    dropped = {i + 1 for i, v in enumerate(all_vars) if v.get("name") in drop}
+    assert len(dropped) == len(drop) and min(dropped) > len(all_vars) - len(drop)  # the last ones
+    for i in sorted(dropped, reverse=True):
+        variables.remove(all_vars[i - 1])
+    for section in root.find("ModelStructure"):
+        for unknown in list(section):
+            if int(unknown.get("index")) in dropped:
+                section.remove(unknown)
+            elif unknown.get("dependencies"):
+                unknown.set("dependencies", " ".join(
+                    d for d in unknown.get("dependencies").split() if int(d) not in dropped))
+    members["modelDescription.xml"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    with zipfile.ZipFile(dest, "w", zipfile.ZIP_DEFLATED) as out:
+        for name, data in members.items():
+            out.writestr(name, data)
+    return dest
+
+
+def test_fmus_of_the_older_interface_run_with_a_second_order_hold(fmu_dir, tmp_path):
+    """AbuBall / SpeedController files without the third- and fourth-order hold variables and
+    without mu_req_peak: the staircase lowers the hold to the order both files have (2), takes
+    the bounds from mu_req at the communication points, and still matches the reference."""
+    older = dict(fmu_dir)
+    for name, drop in _NEWER_VARIABLES.items():
+        older[name] = _older_interface(fmu_dir[name], drop, tmp_path / f"{name}.fmu")
+    exp = StaircaseExperiment(PlantParams(), **REPORT)
+    result = run_staircase(exp, older)
+    s, ref = result.summary, _reference(exp)
+    assert s["experiment"]["hold_order"] == 2
+    assert "mu_req_peak" not in result.table
+    assert s["t_slip"] == pytest.approx(ref.t_slip, abs=1e-6)
+    assert s["mu_high"] == pytest.approx(ref.mu_high, rel=1e-4)
+    # without the in-step peaks mu_low can only fall short of the exact one, never exceed it
+    assert ref.mu_low * (1 - 5e-3) <= s["mu_low"] <= ref.mu_low * (1 + 1e-9)
+    assert s["mu_low"] <= exp.plant.ball.mu < s["mu_high"]
