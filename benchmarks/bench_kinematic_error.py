@@ -44,7 +44,7 @@ from measurement.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.slip_model import signed_mu_req  # noqa: E402
 from test_inference import scenario_tracks  # noqa: E402
 from measurement.calibration_target import render_views  # noqa: E402
-from measurement.camera import write_camera  # noqa: E402
+from measurement.camera import read_camera, write_camera  # noqa: E402
 from measurement.camera_calibration import calibrate_from_frames  # noqa: E402
 from measurement.cli_camera import apply_camera  # noqa: E402
 from measurement.scenario import random_scenario  # noqa: E402
@@ -69,7 +69,8 @@ def main() -> None:
             frames, _, _ = render_views(scn.optics, scn.width, scn.height, a.views, seed)
             cam, _ = calibrate_from_frames(frames, (9, 6))
             write_camera(tmp / "cam.json", cam)
-            x, y, run_opt, info = apply_camera(str(tmp / "cam.json"), x, y,
+            cam = read_camera(tmp / "cam.json")  # as abu measure --camera reads it
+            x, y, run_opt, info = apply_camera(str(tmp / "cam.json"), cam, x, y,
                                                (scn.width, scn.height), opt)
             prior = info["theta_harmonic_prior"]["theta_harmonic_rad"]
         else:

@@ -17,6 +17,9 @@ from .camera import Camera, CameraError
 #: Fewest views with the whole pattern found: 4 unknowns of the lens + 6 of each view's pose;
 #: fewer views leave the distortion centre poorly tied down.
 MIN_VIEWS = 4
+#: Two views whose corners all lie within this distance of each other show the plate in the
+#: same pose (corner noise is ~0.03 px): the second adds no information on the lens [px].
+SAME_POSE_PX = 0.5
 
 
 def parse_pattern(text: str) -> tuple[int, int]:
@@ -113,6 +116,14 @@ def calibrate_from_frames(frames: np.ndarray, pattern: tuple[int, int], *,
             f"{len(used)} of {n} views; at least {MIN_VIEWS} are needed (not found in: "
             f"{', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}); check --pattern "
             "(inner corners, not squares) and that the plate is whole in the views")
+    same = _same_pose_as_earlier(img_pts)
+    if len(used) - len(same) < MIN_VIEWS:
+        pairs = [f"{names[used[j]]} = {names[used[i]]}" for j, i in same.items()]
+        raise CameraError(
+            f"the chessboard was found in {len(used)} views but only {len(used) - len(same)} "
+            f"show distinct poses ({', '.join(pairs[:4])}{' ...' if len(pairs) > 4 else ''}: "
+            f"every corner within {SAME_POSE_PX} px); at least {MIN_VIEWS} distinct views are "
+            "needed: move and turn the plate between views")
     f = float(focal_px) if focal_px else 0.5 * math.hypot(w, h)
     k0 = np.array([[f, 0, (w - 1) / 2.0], [0, f, (h - 1) / 2.0], [0, 0, 1]], float)
     # Flags, for a flat plate lying in the ABU plane (views nearly fronto-parallel):
@@ -126,8 +137,16 @@ def calibrate_from_frames(frames: np.ndarray, pattern: tuple[int, int], *,
              | cv2.CALIB_FIX_ASPECT_RATIO | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     objs = [obj] * len(used)
-    rms, kk, dist, rvecs, tvecs, _, _, per_view = cv2.calibrateCameraExtended(
-        objs, img_pts, (w, h), k0, np.zeros(5), flags=flags, criteria=crit)
+    try:
+        rms, kk, dist, rvecs, tvecs, _, _, per_view = cv2.calibrateCameraExtended(
+            objs, img_pts, (w, h), k0, np.zeros(5), flags=flags, criteria=crit)
+    except cv2.error as exc:  # e.g. a degenerate set of poses: a message, not a traceback
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise CameraError(f"OpenCV could not calibrate from the {len(used)} views ({msg}): "
+                          "use views with the plate moved and turned over the field") from None
+    if not (np.isfinite(rms) and np.isfinite(kk).all() and np.isfinite(dist).all()):
+        raise CameraError(f"the calibration from the {len(used)} views did not converge "
+                          "(non-finite lens parameters): use views spread over the field")
     for j, i in enumerate(used):
         rows[i]["rms_px"] = float(per_view[j, 0])
     cov = _covariance(obj, img_pts, kk, dist, rvecs, tvecs)
@@ -140,6 +159,18 @@ def calibrate_from_frames(frames: np.ndarray, pattern: tuple[int, int], *,
                         "per_view_rms_px": [r.get("rms_px") for r in rows],
                         "views": [r["view"] for r in rows]})
     return cam, rows
+
+
+def _same_pose_as_earlier(img_pts: list[np.ndarray]) -> dict[int, int]:
+    """{j: i} for views j whose corners all lie within :data:`SAME_POSE_PX` of an earlier
+    distinct view i (positions in the list of found views)."""
+    same: dict[int, int] = {}
+    for j in range(len(img_pts)):
+        for i in range(j):
+            if i not in same and float(np.max(np.abs(img_pts[j] - img_pts[i]))) < SAME_POSE_PX:
+                same[j] = i
+                break
+    return same
 
 
 def _covariance(obj, img_pts, kk, dist, rvecs, tvecs) -> np.ndarray:

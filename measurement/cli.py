@@ -172,9 +172,10 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if getattr(args, "drive", None):  # a bad drive.json fails before the tracking
         from controller.drive import load_drive
         load_drive(args.drive)
-    if getattr(args, "camera", None):  # so does a bad camera file
+    camera = None
+    if getattr(args, "camera", None):  # so does a bad camera file (read once, used later)
         from .camera import read_camera
-        read_camera(args.camera)
+        camera = read_camera(args.camera)
     l = in_range("--l", _positive("--l", args.l, "m"), 1e-4, 1.0, "m",
                  "radius of the ball centre's path; a CD drive's is 1.15e-2 m")
     d = in_range("--d", _positive("--d", args.d, "m"), 1e-5, 0.1, "m",
@@ -184,7 +185,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_not_inside(out, [args.input])
     with output_folder(out, overwrite=args.overwrite) as tmp:
-        summary = _measure(args, l, d, fps_opt, options, tmp)
+        summary = _measure(args, l, d, fps_opt, options, tmp, camera)
     if args.json:
         sys.stdout.write(dumps(summary))
     else:
@@ -199,8 +200,9 @@ def _check_sampling(args: argparse.Namespace, time: np.ndarray, source: str, opt
 
 
 def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None, options,
-             out: Path) -> dict:
-    """Track or read the tracks, analyse, write everything into ``out``; returns the summary."""
+             out: Path, camera=None) -> dict:
+    """Track or read the tracks, analyse, write everything into ``out``; returns the summary.
+    ``camera``: the :class:`measurement.camera.Camera` of ``--camera`` (None: no undistortion)."""
     from . import tracks_io
     from .analysis import analyse_tracks
 
@@ -224,14 +226,14 @@ def _measure(args: argparse.Namespace, l: float, d: float, fps_opt: float | None
         time, x_f, y_f, lost = tr["time"], tr["x"], tr["y"], tr["lost"]
         tracking = _tracking_info(tr, fps)
     check_motion_and_roles(time, x_f, y_f, str(args.input))
-    x_a, y_a, camera = x_f, y_f, None
-    if getattr(args, "camera", None):  # undistort; theta's harmonic prior from the calibration
+    x_a, y_a, camera_info = x_f, y_f, None
+    if camera is not None:  # undistort; theta's harmonic prior from the calibration
         from .cli_camera import apply_camera
-        x_a, y_a, options, camera = apply_camera(
-            args.camera, x_f, y_f, None if args.tracks else tr["frame_size"], options)
+        x_a, y_a, options, camera_info = apply_camera(
+            args.camera, camera, x_f, y_f, None if args.tracks else tr["frame_size"], options)
     table, summary = analyse_tracks(time, x_a, y_a, l=l, d=d, lost=lost, options=options)
     summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracking,
-               **summary, **({"camera": camera} if camera else {})}
+               **summary, **({"camera": camera_info} if camera_info else {})}
     if getattr(args, "drive", None):
         from controller.drive import load_drive
         summary["drive"] = load_drive(args.drive).to_dict()

@@ -53,16 +53,16 @@ def cmd_calibrate_camera(args: argparse.Namespace) -> int:
     return 0
 
 
-def apply_camera(path: str, x: np.ndarray, y: np.ndarray, frame_size: tuple[int, int] | None,
-                 options):
-    """Undistort (N, 3) tracked positions and set the theta-harmonic prior from the camera.
+def apply_camera(path: str, cam: cam_mod.Camera, x: np.ndarray, y: np.ndarray,
+                 frame_size: tuple[int, int] | None, options):
+    """Undistort (N, 3) tracked positions and set the theta-harmonic prior from the camera
+    ``cam`` (read from the file ``path``, named in the errors).
 
     Returns (x, y, options, info for summary.json). ``frame_size`` (width, height) [px] of the
     recording, or None for a tracks file (then the positions must lie in the camera's image).
     """
     from .analysis import fixed_axis
 
-    cam = cam_mod.read_camera(path)
     w, h = cam.image_size
     if frame_size is not None and tuple(frame_size) != (w, h):
         raise ParameterError("--camera", path, f"a camera calibrated on {frame_size[0]}x"

@@ -271,3 +271,37 @@ def test_views_that_leave_the_lens_free_are_refused():
     with pytest.raises(cam_mod.CameraError, match="do not tie down the lens"):
         calib._covariance(obj, [np.full((54, 1, 2), 128, np.float32)], kk, np.zeros(5),
                           [np.zeros(3)], [np.array([0, 0, 10.0])])
+
+
+def test_repeated_views_are_not_counted_as_poses(tmp_path, capsys):
+    """The same view four times (or three views and a copy) shows fewer than four poses: a
+    CameraError naming the repeated views and exit 2, not a calibration with a ~5 px centre."""
+    frames, _, _ = render_views(OpticsSpec(k1=0.01), 256, 256, 4, 3)
+    with pytest.raises(cam_mod.CameraError, match=r"only 1 show distinct poses \(view 1 = view 0"):
+        calib.calibrate_from_frames(np.stack([frames[0]] * 4), (9, 6))
+    copy = np.concatenate([frames[:3], frames[1:2]])
+    with pytest.raises(cam_mod.CameraError, match="only 3 show distinct poses"):
+        calib.calibrate_from_frames(copy, (9, 6))
+    cam, _ = calib.calibrate_from_frames(frames, (9, 6))  # the four distinct views do
+    assert cam.n_views == 4
+    views = tmp_path / "views"
+    views.mkdir()
+    np.save(views.with_suffix(".npy"), np.stack([frames[0]] * 5))
+    out = tmp_path / "cam.json"
+    assert main(["calibrate-camera", str(views.with_suffix(".npy")), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "distinct poses" in err and "Traceback" not in err and not out.exists()
+
+
+def test_opencv_failure_is_a_camera_error(monkeypatch):
+    """A cv2.error inside calibrateCameraExtended becomes a CameraError with OpenCV's reason."""
+    import cv2
+
+    frames, _, _ = render_views(OpticsSpec(k1=0.01), 256, 256, 4, 3)
+
+    def fails(*a, **k):
+        raise cv2.error("OpenCV(4.x) calibration.cpp:1 error: (-215:Assertion failed) ni > 0")
+
+    monkeypatch.setattr(cv2, "calibrateCameraExtended", fails)
+    with pytest.raises(cam_mod.CameraError, match="could not calibrate.*Assertion failed"):
+        calib.calibrate_from_frames(frames, (9, 6))
