@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
 import traceback
@@ -169,7 +170,7 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
     * OSError on a path (unreadable input, unwritable output): one line, exit 2.
     * anything else: ``abu CMD: internal error on INPUT: Type: message`` on one line, exit 1;
       with ``--debug`` (anywhere before ``--``) the traceback is printed too.
-    * KeyboardInterrupt: exit 130.
+    * KeyboardInterrupt: exit 130; stdout closed by its reader (``| head``): exit 141, quiet.
     """
     from .output_tx import use_run_tempdir
 
@@ -181,7 +182,9 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
     use_run_tempdir()
     try:
         check_float_options(args._parser, args)
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, inside the error policy, not at exit
+        return status
     except ParameterError as exc:
         if rename is not None:
             exc = rename(args, exc)
@@ -190,6 +193,11 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
     except AbuError as exc:
         _error_line(command, str(exc), debug)
         return 2
+    except BrokenPipeError:
+        # the reader of stdout went away (``abu ... | head``): the results are written;
+        # stop quietly with the shell's status for SIGPIPE, as other Unix tools do
+        _silence_stdout()
+        return 141
     except OSError as exc:
         if exc.filename is None:  # not about a path the user gave: unexpected
             return _internal(command, args, exc, debug)
@@ -230,6 +238,16 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
         if isinstance(action, argparse._SubParsersAction) and command in action.choices:
             return action.choices[command]
     return parser
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush of the closed pipe
+    does not print 'Exception ignored ... BrokenPipeError'."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # no real file descriptor (in-process use)
+        pass
 
 
 def _os_message(exc: OSError) -> str:

@@ -63,6 +63,27 @@ def test_simulate_json_ramp(fmu_folder, capsys):
     assert (b.l - b.d / 5) * abs(a) == pytest.approx(0.01 * b.l * w * w, rel=1e-6)
 
 
+def test_stdout_closed_by_its_reader_is_a_quiet_exit_141(fmu_folder, tmp_path):
+    """``abu simulate --json | head -c 0``: the reader is gone before the output; no
+    'internal error', no 'Exception ignored', the shell's SIGPIPE status; the CSV is written."""
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    out = tmp_path / "run"
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "harness.cli", "simulate", "--motion", "ramp", "--jerk", "5000",
+             "--omega0-hz", "-20", "--t-end", "0.06", "--mu", "0.01", "--fmu-dir", fmu_folder,
+             "--out", str(out), "--json"],
+            stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
+    assert (out / "result.csv").is_file() and (out / "summary.json").is_file()
+
+
 @pytest.mark.parametrize("argv,option", [
     (["simulate", "--te", "0"], "--te"),
     (["simulate", "--omega-end-hz", "-17.5"], "--omega-end-hz"),
