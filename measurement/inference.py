@@ -27,18 +27,12 @@ The profile likelihood ratio of mu against chi^2_1 at the
 stated confidence gives the set of mu the beta data allow *given* the measured kinematics.
 
 The kinematics themselves are uncertain: mu enters the model only through q, which scales with
-omega_dot / omega^2, so an error e on q at the slip is an error e on mu. The noise part of e
-(omega, omega_dot noise at the slip, 1-sigma sigma_e as the estimator states it) is a Gaussian
-nuisance independent of beta's noise, profiled out of the likelihood: mu is accepted if some
-mu' with statistic stat(mu') <= crit lies within a factor 1 +- sigma_e sqrt(crit - stat(mu'))
-of it (a flat-bottomed profile gets the full z sigma_e, a sharp one about the quadrature sum;
-measured on 60 rendered recordings of the harsh family: 10 % narrower in the median, none
-lost). The deterministic parts are added linearly to those bounds: the estimator's truncation-
-error bound (Richardson, ``kinematics``) and the omega_dot error A omega^2 of a systematic first
-harmonic of theta of prior amplitude A (``theta_harmonic_rad``: lens distortion about an
-optical centre off the ABU axis moves the CD marker along its circle; the circle fit of the
-axis cannot see it). mu_d's interval keeps z sigma_e added linearly (its set is taken on a
-coarser grid).
+omega_dot / omega^2, so an error e on q at the slip is an error e on mu. Each profile bound is
+moved outwards by z times the relative 1-sigma error of q at the slip (noise of omega,
+omega_dot) plus the estimator's truncation-error bound (Richardson, ``kinematics``) plus the
+omega_dot error A omega^2 of a systematic first harmonic of theta of prior amplitude A
+(``theta_harmonic_rad``: lens distortion about an optical centre off the ABU axis moves the CD
+marker along its circle; the circle fit of the axis cannot see it).
 
 Null bounds (``status`` says why): the data allow a ball that never slips within the trusted
 region (upper bound null); they allow a ball already slipping at its start (lower bound null);
@@ -64,26 +58,6 @@ def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...]
         if with_theta:
             cols += [np.sin(k * theta), np.cos(k * theta)]
     return np.stack(cols, axis=1)
-
-
-def scale_nuisance_bounds(mu: np.ndarray, stat: np.ndarray, crit: float, sigma_e: float
-                          ) -> tuple[float, float]:
-    """Bounds of the confidence set on mu with a Gaussian relative scale error of q profiled out.
-
-    The data of (mu, mu_d) under q (1 + e) are those of (mu, mu_d) / (1 + e) under q, and e is
-    independent of beta's noise with 1-sigma ``sigma_e``: the deviance is the profile's
-    ``stat`` plus (e / sigma_e)^2, minimised over e. So mu is accepted if it lies within a factor
-    1 +- sigma_e sqrt(crit - stat(mu')) of some candidate mu' the profile accepts. A flat-
-    bottomed profile [a, b] gives [a (1 - z sigma_e), b (1 + z sigma_e)] (z^2 = crit); a sharp
-    quadratic one about the quadrature sum of the two half-widths.
-
-    Args:
-        mu: candidate mu (any order) [1]; stat: their likelihood-ratio statistic [1].
-        crit: the chi^2_1 quantile at the confidence level; sigma_e: relative 1-sigma of q [1].
-    """
-    ok = stat <= crit
-    reach = float(sigma_e) * np.sqrt(np.maximum(crit - stat[ok], 0.0))
-    return float(np.min(mu[ok] * (1.0 - reach))), float(np.max(mu[ok] * (1.0 + reach)))
 
 
 def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.ndarray,
@@ -301,19 +275,20 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             rel_bias = (float(bias_omega_dot[i0 + onset_idx]) / a
                         + float(opt.theta_harmonic_rad) * (wv * wv / a + 2.0))
 
-    mu_lo_n, mu_hi_n = scale_nuisance_bounds(mu_grid, stat, crit,
-                                             rel_noise * float(opt.kinematic_sigma_scale))
-
     def widen(bound: float, sign: int) -> float:
-        # + the deterministic bounds (truncation error, lens harmonic prior), added linearly
+        # q (hence every candidate mu) scales with the measured omega_dot / omega^2: a relative
+        # error e of q at the slip moves the whole profile by e. Added linearly to the profile
+        # bound (conservative: the profile and the kinematic error are not independent
+        # Gaussians), z sigma for the noise plus the truncation bound.
         # (mu >= 0: a widening past 100 % leaves the trivial lower bound 0)
-        return max(0.0, bound * (1.0 + sign * rel_bias))
+        return max(0.0, bound * (1.0 + sign * (z * rel_noise * opt.kinematic_sigma_scale
+                                               + rel_bias)))
 
     status = "ok"
     # A ball that may already slide at the start of the trusted region carries an unknown
     # speed from an unknown earlier slip (q before the region is unknown): no bound at all.
-    mu_low = None if at_start_ok else widen(mu_lo_n, -1)
-    mu_high = None if (no_slip_ok or at_start_ok) else widen(mu_hi_n, +1)
+    mu_low = None if at_start_ok else widen(m_lo_b, -1)
+    mu_high = None if (no_slip_ok or at_start_ok) else widen(m_hi_b, +1)
     if no_slip_ok and at_start_ok:
         status = "no bound: the data fit both a ball slipping from the start and one never slipping"
     elif no_slip_ok:

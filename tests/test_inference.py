@@ -165,29 +165,3 @@ def test_slow_onsets_lower_bound_stays_below_mu():
           f"{[None if lo is None else round(100 * (lo / mu - 1), 1) for _, lo, mu, _ in rows]} %")
     assert all(st == "ok" for *_, st in rows), rows
     assert all(lo <= mu for _, lo, mu, _ in rows), rows
-
-
-def test_scale_nuisance_bounds_against_closed_forms():
-    """Profiling the relative scale error e of q (1-sigma s_e) out of the deviance: a flat
-    profile on [a, b] gets the full z s_e on each side; a quadratic profile of half-width h
-    about m0 gets (to first order in h/m0, s_e) the quadrature sum z sqrt(h^2 + (s_e m0)^2);
-    without the nuisance the bounds are the profile's own."""
-    from measurement.inference import scale_nuisance_bounds
-
-    z = 1.959963984540054
-    crit = z * z
-    mu = np.geomspace(0.01, 0.05, 40001)
-    flat = np.where((mu >= 0.02) & (mu <= 0.03), 0.0, 99.0)
-    lo, hi = scale_nuisance_bounds(mu, flat, crit, 0.04)
-    assert lo == pytest.approx(0.02 * (1 - z * 0.04), rel=1e-4)
-    assert hi == pytest.approx(0.03 * (1 + z * 0.04), rel=1e-4)
-    m0, s_e = 0.03, 0.005
-    for h_rel in (0.002, 0.005, 0.02):          # profile 1-sigma half-width / m0
-        stat = ((mu - m0) / (h_rel * m0)) ** 2
-        lo, hi = scale_nuisance_bounds(mu, stat, crit, s_e)
-        half = z * m0 * math.hypot(h_rel, s_e)
-        assert (hi - m0) == pytest.approx(half, rel=0.02)
-        assert (m0 - lo) == pytest.approx(half, rel=0.02)
-        lo0, hi0 = scale_nuisance_bounds(mu, stat, crit, 0.0)
-        assert (hi0 - m0) == pytest.approx(z * h_rel * m0, abs=2e-6)  # the grid step
-        assert lo < lo0 and hi > hi0
