@@ -47,7 +47,8 @@ def _finite(name: str, value: float) -> float:
 
 
 def sine_progress(s: float) -> float:
-    """p(s) = s - sin(2 pi s)/(2 pi): the inclined sine's normalised progress, 0 at s=0, 1 at s=1."""
+    ("""p(s) = s - sin(2 pi s)/(2 pi): the inclined sine's normalised progress, 0 at s=0, """
+     """1 at s=1.""")
     return s - math.sin(2.0 * math.pi * s) / (2.0 * math.pi)
 
 
@@ -72,7 +73,8 @@ def inclined_sine(t: float | Iterable[float], omega0: float, omega_end: float, t
 
 def inclined_sine_rate(t: float | Iterable[float], omega0: float, omega_end: float, t0: float,
                        te: float) -> float | list[float]:
-    """Time derivative of eq. 4.8 [rad/s^2]: (omega_end - omega0)/te (1 - cos(2 pi s)) inside [t0, t0+te]."""
+    ("""Time derivative of eq. 4.8 [rad/s^2]: (omega_end - omega0)/te (1 - cos(2 pi s)) """
+     """inside [t0, t0+te].""")
     def one(x: float) -> float:
         s = (x - t0) / te
         if not 0.0 <= s <= 1.0:

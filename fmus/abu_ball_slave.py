@@ -111,8 +111,10 @@ class AbuBall(Fmi2Slave):
         fixed = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
         self.register_variable(Real("m", description="ball mass, > 0 [kg]", **fixed))
         self.register_variable(Real("d", description="ball diameter, > 0 and < 2 l [m]", **fixed))
-        self.register_variable(Real("l", description="radius of the ball centre's path, > 0 [m]", **fixed))
-        self.register_variable(Real("mu", description="static friction coefficient, >= 0 [1]", **fixed))
+        self.register_variable(Real(
+            "l", description="radius of the ball centre's path, > 0 [m]", **fixed))
+        self.register_variable(Real(
+            "mu", description="static friction coefficient, >= 0 [1]", **fixed))
         self.register_variable(Real(
             "mu_d", description="sliding friction coefficient, 0 <= mu_d <= mu [1]; "
                                 "negative (default -1) means mu_d = mu", **fixed))
@@ -125,34 +127,43 @@ class AbuBall(Fmi2Slave):
                                          "false: J_abu alpha = T (the report's model)", **fixed))
         self.register_variable(Real("theta0", description="initial ABU angle [rad]", **fixed))
         self.register_variable(Real("omega0", description="initial ABU speed [rad/s]", **fixed))
-        self.register_variable(Real("beta0", description="initial ball angle relative to the ABU [rad]", **fixed))
+        self.register_variable(Real(
+            "beta0", description="initial ball angle relative to the ABU [rad]", **fixed))
         self.register_variable(Real(
             "beta_dot0", description="initial ball speed relative to the ABU [rad/s]; "
                                      "0 starts in stick, else in slip", **fixed))
         inp = dict(causality=Fmi2Causality.input)
-        self.register_variable(Real("torque", description="commanded torque at the step start [N m]",
-                                    setter=self._set_torque, **inp))
-        self.register_variable(Real("torque_rate", description="rate of the commanded torque inside "
-                                    "a step (first-order hold) [N m/s]", **inp))
+        self.register_variable(Real(
+            "torque", description="commanded torque at the step start [N m]",
+            setter=self._set_torque, **inp))
+        self.register_variable(Real(
+            "torque_rate", description="rate of the commanded torque inside "
+                                       "a step (first-order hold) [N m/s]", **inp))
         out = dict(causality=Fmi2Causality.output)
         state = self._state_value
-        self.register_variable(Real("theta", description="ABU angle [rad]", getter=lambda: state("theta"), **out))
-        self.register_variable(Real("omega", description="ABU speed [rad/s]", getter=lambda: state("omega"), **out))
-        self.register_variable(Real("alpha", description="ABU acceleration for the current torque input [rad/s2]",
-                                    getter=lambda: self._output("alpha"), **out))
+        self.register_variable(Real(
+            "theta", description="ABU angle [rad]", getter=lambda: state("theta"), **out))
+        self.register_variable(Real(
+            "omega", description="ABU speed [rad/s]", getter=lambda: state("omega"), **out))
+        self.register_variable(Real(
+            "alpha", description="ABU acceleration for the current torque input [rad/s2]",
+            getter=lambda: self._output("alpha"), **out))
         self.register_variable(Real("beta", description="ball angle relative to the ABU [rad]",
                                     getter=lambda: state("beta"), **out))
-        self.register_variable(Real("beta_dot", description="ball speed relative to the ABU [rad/s]",
-                                    getter=lambda: state("beta_dot"), **out))
-        self.register_variable(Real("beta_ddot", description="ball acceleration relative to the ABU [rad/s2]",
-                                    getter=lambda: self._output("beta_ddot"), **out))
-        self.register_variable(Real("normal_force", description="normal force of the rim on the ball [N]",
-                                    getter=lambda: self._output("normal_force"), **out))
+        self.register_variable(Real(
+            "beta_dot", description="ball speed relative to the ABU [rad/s]",
+            getter=lambda: state("beta_dot"), **out))
+        self.register_variable(Real(
+            "beta_ddot", description="ball acceleration relative to the ABU [rad/s2]",
+            getter=lambda: self._output("beta_ddot"), **out))
+        self.register_variable(Real(
+            "normal_force", description="normal force of the rim on the ball [N]",
+            getter=lambda: self._output("normal_force"), **out))
         self.register_variable(Real("friction_force", description="friction force on the ball [N]",
                                     getter=lambda: self._output("friction_force"), **out))
         self.register_variable(Real(
-            "mu_req", description="(l - d/5)|alpha| / (l omega^2): friction coefficient that sticking "
-                                  "requires now [1] (inf at omega = 0)",
+            "mu_req", description="(l - d/5)|alpha| / (l omega^2): friction coefficient that "
+                                  "sticking requires now [1] (inf at omega = 0)",
             getter=lambda: self._output("mu_req"), **out))
         self.register_variable(Real(
             "torque_applied", description="torque acting on the rotor (after the motor lag) [N m]",
@@ -162,14 +173,20 @@ class AbuBall(Fmi2Slave):
                                 "second-order hold of the controller's torque)",
             getter=lambda: self._alpha_derivative(1), **out))
         discrete = dict(causality=Fmi2Causality.output, variability=Fmi2Variability.discrete)
-        self.register_variable(Integer("mode", description="-1 slip with beta_dot < 0, 0 stick, "
-                                       "1 slip with beta_dot > 0", getter=lambda: self._int_state("mode"), **discrete))
-        self.register_variable(Integer("switch_count", description="stick/slip switches since the start",
-                                       getter=lambda: self._int_state("switch_count"), **discrete))
-        self.register_variable(Real("t_last_switch", description="time of the last stick/slip switch, "
-                                    "-1e30 before the first [s]", getter=self._t_last_switch, **out))
-        self.register_variable(Integer("step_switches", description="stick/slip switches inside the "
-                                       "last do_step", **discrete))
+        self.register_variable(Integer(
+            "mode", description="-1 slip with beta_dot < 0, 0 stick, "
+                                "1 slip with beta_dot > 0",
+            getter=lambda: self._int_state("mode"), **discrete))
+        self.register_variable(Integer(
+            "switch_count", description="stick/slip switches since the start",
+            getter=lambda: self._int_state("switch_count"), **discrete))
+        self.register_variable(Real(
+            "t_last_switch", description="time of the last stick/slip switch, "
+                                         "-1e30 before the first [s]",
+            getter=self._t_last_switch, **out))
+        self.register_variable(Integer(
+            "step_switches", description="stick/slip switches inside the "
+                                         "last do_step", **discrete))
         self.register_variable(Real("t_first_step_switch", description="time of the first switch "
                                     "inside the last do_step, -1e30 if none [s]", **out))
         # Registered last: the value references above stay those of earlier versions.
@@ -321,7 +338,8 @@ class AbuBall(Fmi2Slave):
         else:
             if not isinstance(plant, (list, tuple)) or len(plant) != len(STATE_FIELDS):
                 raise ValueError(f"AbuBall state: 'plant' must hold {len(STATE_FIELDS)} numbers")
-            values = check_record(dict(zip(STATE_FIELDS, plant)), _PLANT_KINDS, "AbuBall plant state")
+            values = check_record(dict(zip(STATE_FIELDS, plant)), _PLANT_KINDS,
+                                  "AbuBall plant state")
             if values["mode"] not in (Mode.SLIP_NEG, Mode.STICK, Mode.SLIP_POS):
                 raise ValueError(f"AbuBall plant state: mode = {values['mode']} is not -1, 0 or 1")
             if values["switch_count"] < 0 or values["t_last_switch"] == math.inf:

@@ -29,13 +29,14 @@ RUNTIME_SOURCE = HERE / "fmu_runtime.py"
 #: shipped: the FMU brings its own binary).
 PYTHONFMU_RUNTIME_FILES = ("_version.py", "default_experiment.py", "enums.py", "fmi2slave.py",
                            "logmsg.py", "variables.py")
-PYTHONFMU_INIT = '''"""Runtime part of pythonfmu {version} (MIT licence), vendored by the abu-friction build."""
+PYTHONFMU_INIT = ('''"""Runtime part of pythonfmu {version} (MIT licence), '''
+                  '''vendored by the abu-friction build."""
 from ._version import __version__
 from .default_experiment import DefaultExperiment
 from .enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 from .fmi2slave import Fmi2Slave
 from .variables import Boolean, Integer, Real, String
-'''
+''')
 
 
 def vendor_pythonfmu(dest: Path) -> None:
@@ -56,7 +57,8 @@ def vendor_pythonfmu(dest: Path) -> None:
 def write_runtime(dest: Path, module: str, class_name: str) -> Path:
     """Write ``<module>_rt.py``, the runtime the native layer imports, into ``dest``."""
     text = RUNTIME_SOURCE.read_text(encoding="utf-8")
-    text = text.replace('"@SLAVE_MODULE@"', repr(module)).replace('"@SLAVE_CLASS@"', repr(class_name))
+    text = (text.replace('"@SLAVE_MODULE@"', repr(module))
+            .replace('"@SLAVE_CLASS@"', repr(class_name)))
     target = dest / f"{module}_rt.py"
     target.write_text(text, encoding="utf-8")
     return target

@@ -8,7 +8,8 @@ Each FMU is self-contained apart from a Python interpreter (standard library onl
   interpreter and one ``sys.modules``;
 * the project modules it needs (``abu_model``, ``controller``; only those its imports reach,
   :func:`module_closure`) are copied into the FMU's resources under package names unique per
-  FMU (``abuball_abu_model`` ...), and pythonfmu's runtime part as ``<module>_pythonfmu``. Their absolute imports of
+  FMU (``abuball_abu_model`` ...), and pythonfmu's runtime part as ``<module>_pythonfmu``. \
+Their absolute imports of
   project packages are rewritten to the vendored names here, and a build fails if a vendored
   file imports a project package that is not vendored with it, so an FMU never picks up
   another installed version of the toolkit;
@@ -114,7 +115,8 @@ def module_closure(script: Path, packages: Mapping[str, Path]) -> dict[str, set[
     Absolute imports of a package in ``packages`` (name -> folder) and relative imports inside
     those packages are followed; every package's ``__init__.py`` is included.
     """
-    needed: dict[str, set[Path]] = {name: {folder / "__init__.py"} for name, folder in packages.items()}
+    needed: dict[str, set[Path]] = {name: {folder / "__init__.py"}
+                                    for name, folder in packages.items()}
     todo, seen = [script, *(f for files in needed.values() for f in files)], set()
 
     def add(package: str, parts: list[str]) -> None:
@@ -162,7 +164,8 @@ def rewrite_imports(source: str, renames: Mapping[str, str], filename: str = "<s
         where = f"{filename}:{node.lineno}"
         if top not in renames:
             raise FmuBuildError(f"{where}: imports project package '{top}', which is not "
-                                f"vendored into this FMU (vendored: {', '.join(renames) or 'none'})")
+                                "vendored into this FMU "
+                                f"(vendored: {', '.join(renames) or 'none'})")
         if isinstance(node, ast.Import):
             raise FmuBuildError(f"{where}: 'import {top}...' cannot be vendored; use "
                                 f"'from {top}... import name' or a relative import")

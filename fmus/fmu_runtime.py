@@ -58,7 +58,8 @@ def instantiate(name: str, resources: str, visible: int, logging_on: int):
     try:
         return OK, Instance(name, resources, visible, logging_on)
     except Exception as exc:  # noqa: BLE001 - reported to the host, never raised
-        return ERROR, f"{SLAVE_CLASS} '{name}': cannot create the slave: {type(exc).__name__}: {exc}"
+        return ERROR, (f"{SLAVE_CLASS} '{name}': cannot create the slave: "
+                       f"{type(exc).__name__}: {exc}")
 
 
 def _calls(method):
@@ -281,7 +282,8 @@ class Instance:
                 _, name, causality, variability = meta[vr]
                 setter = self.vars[vr].setter
                 if causality not in ("parameter", "input") or setter is None:
-                    return self._error(f"{fn}: '{name}' is a {causality} variable and cannot be set")
+                    return self._error(f"{fn}: '{name}' is a {causality} variable "
+                                       "and cannot be set")
                 plan.append((setter, name, variability in ("fixed", "constant")))
             if len(self._setters) < 256:
                 self._setters[(kind, vrs)] = plan

@@ -131,7 +131,8 @@ def fix_model_description(xml: bytes, spec: InterfaceSpec) -> bytes:
             if unit not in used_units:
                 used_units.append(unit)
         elif name in spec.units:
-            raise FmuBuildError(f"{vtype} variable '{name}' cannot carry a unit (FMI 2.0: Real only)")
+            raise FmuBuildError(f"{vtype} variable '{name}' cannot carry a unit "
+                                "(FMI 2.0: Real only)")
 
     # UnitDefinitions, placed where the schema wants it.
     for old in root.findall("UnitDefinitions"):
@@ -150,7 +151,8 @@ def fix_model_description(xml: bytes, spec: InterfaceSpec) -> bytes:
         raise FmuBuildError(f"outputs without declared dependencies: {missing}")
     not_outputs = [name for name in spec.output_dependencies if causality.get(name) != "output"]
     if not_outputs:
-        raise FmuBuildError(f"dependencies declared for variables that are not outputs: {not_outputs}")
+        raise FmuBuildError("dependencies declared for variables that are not outputs: "
+                            f"{not_outputs}")
 
     structure = root.find("ModelStructure")
     if structure is None:
@@ -172,7 +174,8 @@ def fix_model_description(xml: bytes, spec: InterfaceSpec) -> bytes:
     initial_unknowns = []
     for sv in variables:
         name = sv.get("name")
-        if causality[name] == "output" and sv.get("initial", "calculated") in ("approx", "calculated"):
+        if (causality[name] == "output"
+                and sv.get("initial", "calculated") in ("approx", "calculated")):
             initial_unknowns.append(index[name])
         elif causality[name] == "calculatedParameter":
             initial_unknowns.append(index[name])

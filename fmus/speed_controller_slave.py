@@ -79,48 +79,70 @@ class SpeedController(Fmi2Slave):
         self._law: PISpeedController | None = None
 
         fixed = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
-        self.register_variable(Real("zeta", description="damping ratio of the identified closed loop, > 0 [1]", **fixed))
-        self.register_variable(Real("omega_n", description="natural frequency of the identified closed loop, > 0 [rad/s]", **fixed))
-        self.register_variable(Real("J_abu", description="rotor inertia the gains are scaled with, > 0 [kg m2]", **fixed))
+        self.register_variable(Real(
+            "zeta", description="damping ratio of the identified closed loop, > 0 [1]", **fixed))
+        self.register_variable(Real(
+            "omega_n", description="natural frequency of the identified closed loop, "
+                                   "> 0 [rad/s]", **fixed))
+        self.register_variable(Real(
+            "J_abu", description="rotor inertia the gains are scaled with, > 0 [kg m2]", **fixed))
         self.register_variable(Integer(
             "theta_ref_mode", description="0 integral (x_I' = omega_ref - omega), "
                                           "1 thesis (e_theta = t omega_ref - theta)", **fixed))
-        self.register_variable(Real("x_I0", description="initial integrator state x_I [rad]", **fixed))
+        self.register_variable(Real(
+            "x_I0", description="initial integrator state x_I [rad]", **fixed))
         inp = dict(causality=Fmi2Causality.input)
         self.register_variable(Real("omega_ref", description="speed setpoint [rad/s]", **inp))
         self.register_variable(Real("omega", description="measured ABU speed [rad/s]", **inp))
-        self.register_variable(Real("theta", description="ABU angle (used in thesis mode) [rad]", **inp))
-        self.register_variable(Real("alpha", description="ABU acceleration, for torque_rate and the integrator [rad/s2]", **inp))
-        self.register_variable(Real("jerk", description="ABU jerk d(alpha)/dt, for torque_accel and "
-                                    "the integrator (second-order hold; 0: first-order) [rad/s3]", **inp))
+        self.register_variable(Real(
+            "theta", description="ABU angle (used in thesis mode) [rad]", **inp))
+        self.register_variable(Real(
+            "alpha", description="ABU acceleration, for torque_rate and the integrator "
+                                 "[rad/s2]", **inp))
+        self.register_variable(Real(
+            "jerk", description="ABU jerk d(alpha)/dt, for torque_accel and the integrator "
+                                "(second-order hold; 0: first-order) [rad/s3]", **inp))
         out = dict(causality=Fmi2Causality.output)
         self.register_variable(Real("torque", description="commanded motor torque [N m]",
                                     getter=self._torque, **out))
-        self.register_variable(Real("torque_rate", description="time derivative of the commanded torque "
-                                    "between setpoint steps, -Kp alpha + Ki (omega_ref - omega) [N m/s]",
-                                    getter=self._torque_rate, **out))
-        self.register_variable(Real("torque_accel", description="second time derivative of the commanded "
-                                    "torque between setpoint steps, -Kp jerk - Ki alpha [N m/s2]",
-                                    getter=lambda: self._torque_derivative("jerk", "alpha"), **out))
-        self.register_variable(Real("x_I", description="integrator state (integral of omega_ref - omega) [rad]",
-                                    getter=lambda: self.x_I, **out))
+        self.register_variable(Real(
+            "torque_rate", description="time derivative of the commanded torque "
+                                       "between setpoint steps, -Kp alpha + Ki (omega_ref - omega) "
+                                       "[N m/s]",
+            getter=self._torque_rate, **out))
+        self.register_variable(Real(
+            "torque_accel", description="second time derivative of the commanded "
+                                        "torque between setpoint steps, -Kp jerk - Ki alpha "
+                                        "[N m/s2]",
+            getter=lambda: self._torque_derivative("jerk", "alpha"), **out))
+        self.register_variable(Real(
+            "x_I", description="integrator state (integral of omega_ref - omega) [rad]",
+            getter=lambda: self.x_I, **out))
         # Registered last: the value references above stay those of earlier versions.
-        self.register_variable(Real("snap", description="d(jerk)/dt of the ABU, for torque_jerk and the "
-                                    "integrator (third-order hold; 0: lower order) [rad/s4]", **inp))
-        self.register_variable(Real("crackle", description="d(snap)/dt of the ABU, for torque_snap and the "
-                                    "integrator (fourth-order hold; 0: lower order) [rad/s5]", **inp))
-        self.register_variable(Real("torque_jerk", description="third time derivative of the commanded "
-                                    "torque between setpoint steps, -Kp snap - Ki jerk [N m/s3]",
-                                    getter=lambda: self._torque_derivative("snap", "jerk"), **out))
-        self.register_variable(Real("torque_snap", description="fourth time derivative of the commanded "
-                                    "torque between setpoint steps, -Kp crackle - Ki snap [N m/s4]",
-                                    getter=lambda: self._torque_derivative("crackle", "snap"), **out))
+        self.register_variable(Real(
+            "snap", description="d(jerk)/dt of the ABU, for torque_jerk and the "
+                                "integrator (third-order hold; 0: lower order) [rad/s4]", **inp))
+        self.register_variable(Real(
+            "crackle", description="d(snap)/dt of the ABU, for torque_snap and the "
+                                   "integrator (fourth-order hold; 0: lower order) [rad/s5]",
+            **inp))
+        self.register_variable(Real(
+            "torque_jerk", description="third time derivative of the commanded "
+                                       "torque between setpoint steps, -Kp snap - Ki jerk "
+                                       "[N m/s3]",
+            getter=lambda: self._torque_derivative("snap", "jerk"), **out))
+        self.register_variable(Real(
+            "torque_snap", description="fourth time derivative of the commanded "
+                                       "torque between setpoint steps, -Kp crackle - Ki snap "
+                                       "[N m/s4]",
+            getter=lambda: self._torque_derivative("crackle", "snap"), **out))
 
     # ----------------------------------------------------------------- model
     def _build_law(self) -> PISpeedController:
         mode = int(self.theta_ref_mode)
         if mode not in range(len(THETA_REF_MODES)):
-            raise ParameterError("theta_ref_mode", self.theta_ref_mode, "0 (integral) or 1 (thesis)")
+            raise ParameterError("theta_ref_mode", self.theta_ref_mode,
+                                 "0 (integral) or 1 (thesis)")
         x_i0 = float(self.x_I0)
         if not math.isfinite(x_i0):
             raise ParameterError("x_I0", self.x_I0, "a finite number [rad]")

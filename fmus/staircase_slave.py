@@ -61,11 +61,15 @@ class Staircase(Fmi2Slave):
         self._model: StaircaseModel | None = None
 
         fixed = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
-        self.register_variable(Real("omega0", description="setpoint before the first step [rad/s]", **fixed))
-        self.register_variable(Real("omega_end", description="end value of the inclined sine [rad/s]", **fixed))
+        self.register_variable(Real(
+            "omega0", description="setpoint before the first step [rad/s]", **fixed))
+        self.register_variable(Real(
+            "omega_end", description="end value of the inclined sine [rad/s]", **fixed))
         self.register_variable(Real("t0", description="start of the inclined sine [s]", **fixed))
-        self.register_variable(Real("te", description="duration of the inclined sine, > 0 [s]", **fixed))
-        self.register_variable(Real("step", description="setpoint resolution, > 0 [rad/s] (2 pi rad/s = 1 Hz)", **fixed))
+        self.register_variable(Real(
+            "te", description="duration of the inclined sine, > 0 [s]", **fixed))
+        self.register_variable(Real(
+            "step", description="setpoint resolution, > 0 [rad/s] (2 pi rad/s = 1 Hz)", **fixed))
         self.register_variable(Integer(
             "rounding", description="step k at the sine crossing omega0 + (k - r) step: "
                                     "0 lead (r = 1, report), 1 nearest (r = 1/2), 2 trail (r = 0)",

@@ -63,34 +63,49 @@ def _renamed(exc: ParameterError) -> ParameterError:
 def _add_plant_options(p: argparse.ArgumentParser) -> None:
     b = BallParams()
     g = p.add_argument_group("plant (SI units)")
-    g.add_argument("--mu", type=float, default=b.mu, help=f"static friction coefficient [-] (default {b.mu:g})")
-    g.add_argument("--mu-d", type=float, default=None, help="sliding friction coefficient [-] (default: mu)")
+    g.add_argument("--mu", type=float, default=b.mu,
+                   help=f"static friction coefficient [-] (default {b.mu:g})")
+    g.add_argument("--mu-d", type=float, default=None,
+                   help="sliding friction coefficient [-] (default: mu)")
     g.add_argument("--m", type=float, default=b.m, help=f"ball mass [kg] (default {b.m:g})")
     g.add_argument("--d", type=float, default=b.d, help=f"ball diameter [m] (default {b.d:g})")
-    g.add_argument("--l", type=float, default=b.l, help=f"radius of the ball centre's path [m] (default {b.l:g})")
-    g.add_argument("--j-abu", type=float, default=DEFAULT_J_ABU, help=f"rotor inertia [kg m^2] (default {DEFAULT_J_ABU:g})")
-    g.add_argument("--tau-motor", type=float, default=0.0, help="motor torque lag time constant [s] (default 0: none)")
-    g.add_argument("--ball-reaction", action="store_true", help="let the ball's reaction act on the rotor")
-    g.add_argument("--beta0", type=float, default=0.0, help="initial ball angle relative to the ABU [rad]")
+    g.add_argument("--l", type=float, default=b.l,
+                   help=f"radius of the ball centre's path [m] (default {b.l:g})")
+    g.add_argument("--j-abu", type=float, default=DEFAULT_J_ABU,
+                   help=f"rotor inertia [kg m^2] (default {DEFAULT_J_ABU:g})")
+    g.add_argument("--tau-motor", type=float, default=0.0,
+                   help="motor torque lag time constant [s] (default 0: none)")
+    g.add_argument("--ball-reaction", action="store_true",
+                   help="let the ball's reaction act on the rotor")
+    g.add_argument("--beta0", type=float, default=0.0,
+                   help="initial ball angle relative to the ABU [rad]")
 
 
 def _add_controller_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("speed controller")
     g.add_argument("--theta-ref", choices=["integral", "thesis"], default="integral",
-                   help="theta_ref reading: integral of the setpoint (default) or the report's t*w_ref")
-    g.add_argument("--zeta", type=float, default=0.5, help="closed-loop damping ratio [-] (default 0.5)")
-    g.add_argument("--omega-n", type=float, default=2.2, help="closed-loop natural frequency [rad/s] (default 2.2)")
+                   help="theta_ref reading: integral of the setpoint (default) or the report's "
+                        "t*w_ref")
+    g.add_argument("--zeta", type=float, default=0.5,
+                   help="closed-loop damping ratio [-] (default 0.5)")
+    g.add_argument("--omega-n", type=float, default=2.2,
+                   help="closed-loop natural frequency [rad/s] (default 2.2)")
 
 
 def _add_staircase_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("staircase")
-    g.add_argument("--omega0-hz", type=float, default=-17.0, help="initial speed [Hz] (default -17)")
-    g.add_argument("--omega-end-hz", type=float, default=-22.0, help="end of the inclined sine [Hz] (default -22)")
-    g.add_argument("--t0", type=float, default=0.0, help="start of the inclined sine [s] (default 0)")
-    g.add_argument("--te", type=float, default=1.0, help="duration of the inclined sine [s] (default 1)")
+    g.add_argument("--omega0-hz", type=float, default=-17.0,
+                   help="initial speed [Hz] (default -17)")
+    g.add_argument("--omega-end-hz", type=float, default=-22.0,
+                   help="end of the inclined sine [Hz] (default -22)")
+    g.add_argument("--t0", type=float, default=0.0,
+                   help="start of the inclined sine [s] (default 0)")
+    g.add_argument("--te", type=float, default=1.0,
+                   help="duration of the inclined sine [s] (default 1)")
     g.add_argument("--t-end", type=float, default=None,
                    help="end of the simulation [s] (default: t0 + te + 0.5; ramp: 1)")
-    g.add_argument("--step-hz", type=float, default=1.0, help="setpoint resolution [Hz] (default 1)")
+    g.add_argument("--step-hz", type=float, default=1.0,
+                   help="setpoint resolution [Hz] (default 1)")
     g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
                    help="when each step happens on the sine (default lead: the report's)")
 
@@ -111,8 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_build_fmus)
 
     p = sub.add_parser("simulate", help="co-simulate the staircase or the ramp experiment",
-                       description="Co-simulate an experiment of the report (ch. 4) on the FMUs and "
-                                   "compute the friction bounds mu_low <= mu < mu_high.")
+                       description="Co-simulate an experiment of the report (ch. 4) on the FMUs "
+                                   "and compute the friction bounds mu_low <= mu < mu_high.")
     p.add_argument("--motion", choices=["staircase", "ramp"], default="staircase",
                    help="staircase of setpoints (sec. 4.2, default) or prescribed acceleration "
                         "ramp (sec. 4.1)")
@@ -148,7 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mu", type=float, nargs="+", required=True, help="friction coefficients [-]")
     p.add_argument("--theta-ref", choices=["integral", "thesis"], default="integral",
                    help="theta_ref reading (default integral)")
-    p.add_argument("--t-step", type=float, default=0.0, help="time of the step [s] (thesis mode; default 0)")
+    p.add_argument("--t-step", type=float, default=0.0,
+                   help="time of the step [s] (thesis mode; default 0)")
     p.add_argument("--step-hz", type=float, default=1.0, help="setpoint step [Hz] (default 1)")
     p.add_argument("--no-check", action="store_true", help="skip the co-simulation check")
     p.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built if missing)")
@@ -176,7 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="initial speeds [Hz]; the staircase spans --span-hz from each")
     p.add_argument("--span-hz", type=float, default=-5.0,
                    help="omega_end - omega0 [Hz] (default -5, the report's)")
-    p.add_argument("--te", type=float, default=1.0, help="duration of the inclined sine [s] (default 1)")
+    p.add_argument("--te", type=float, default=1.0,
+                   help="duration of the inclined sine [s] (default 1)")
     p.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead")
     _add_controller_options(p)
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")

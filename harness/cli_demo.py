@@ -45,8 +45,9 @@ def _demo(out: Path) -> int:
         result = run_staircase(exp, fmus)
         s = result.summary
         written = write_outputs(result, out / mode)
-        print(f"\n[{mode}] mu_low = {fmt_value(s['mu_low'])} [-] <= mu = {fmt_value(s['mu'])} [-] < "
-              f"mu_high = {fmt_value(s['mu_high'])} [-]; first slip at t = {fmt_value(s['t_slip'], 's', 6)}")
+        print(f"\n[{mode}] mu_low = {fmt_value(s['mu_low'])} [-] <= mu = {fmt_value(s['mu'])} "
+              f"[-] < mu_high = {fmt_value(s['mu_high'])} [-]; "
+              f"first slip at t = {fmt_value(s['t_slip'], 's', 6)}")
         if mode == "thesis":
             print(f"[{mode}] report eq. 4.9: mu_low = {REPORT_BOUNDS['mu_low']:g} [-], "
                   f"mu_high = {REPORT_BOUNDS['mu_high']:g} [-] (differences "

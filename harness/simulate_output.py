@@ -43,7 +43,8 @@ def describe(summary: dict[str, Any]) -> list[str]:
         lines.append(f"mu_low = {fmt_value(summary['mu_low'])} [-], "
                      f"mu_high = {fmt_value(summary['mu_high'])} [-]")
     if summary.get("mu_estimate") is not None:
-        lines.append(f"mu estimate at the slip (eq. 4.1/4.2) = {fmt_value(summary['mu_estimate'], '', 7)} [-]")
+        lines.append("mu estimate at the slip (eq. 4.1/4.2) = "
+                     f"{fmt_value(summary['mu_estimate'], '', 7)} [-]")
     lines.append(f"first slip at t = {fmt_value(summary['t_slip'], 's', 9)}"
                  + (f", omega = {fmt_value(summary['omega_slip'], 'rad/s')}"
                     f" ({fmt_value(summary['omega_slip'] / HZ, 'Hz')}), "
