@@ -182,7 +182,7 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
                                      kin.sigma_omega, kin.sigma_omega_dot, kin.bias_omega_dot,
                                      trusted, l=l, d=d, direction=direction, lost=lost_any,
                                      deviation=iv.deviation, record_residual=harm.residual,
-                                     options=opt.inference)
+                                     omega_dot_rho=kin.omega_dot_rho, options=opt.inference)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}
 
 

@@ -48,6 +48,7 @@ from statistics import NormalDist
 from .inference_types import MU_D_RATIO, Inference, InferenceOptions  # noqa: F401 (API)
 from .noise_models import Gls as _Gls, ar1 as _ar1, leftover_whitener, long_run_factor  # noqa: F401
 from .noise_models import noise_level  # noqa: F401 (re-exported)
+from . import sup_noise
 from .slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
 
 def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...],
@@ -66,6 +67,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
              direction: int, lost: np.ndarray | None = None,
              deviation: np.ndarray | None = None,
              record_residual: np.ndarray | None = None,
+             omega_dot_rho: np.ndarray | None = None,
              options: InferenceOptions | None = None) -> Inference:
     """Confidence sets on mu and mu_d from beta(t) and the measured kinematics.
 
@@ -81,6 +83,10 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             along the slip direction [rad] (``interval``); it sets the end of the fit window.
         record_residual: (N,) residual of the whole-record harmonic fit [rad]; the leftover
             noise is also estimated on its trusted part (``noise_models.leftover_whitener``).
+        omega_dot_rho: autocorrelation of omega_dot's noise error at lags 0, 1, ... samples
+            (``Kinematics.omega_dot_rho``): the lower bound's noise term then covers the
+            largest error over the stretch that could have set it (:mod:`sup_noise`); None:
+            the pointwise z sigma.
     """
     opt = options or InferenceOptions()
     idx = np.flatnonzero(trusted)
@@ -262,27 +268,53 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     m_hat, onset = models(np.array([mu_hat]), np.array([mu_d_hat if slip_seen else mu_hat]))
     if np.isfinite(onset[0]):
         onset_idx = int(np.clip(round((onset[0] - t[0]) / (t[1] - t[0])), 0, t.size - 1))
+    def kinematic_error(j: int) -> tuple[float, float]:
+        """(relative 1-sigma noise, relative bias bound) of q at fit-window sample j."""
+        a = abs(float(omega_dot[i0 + j]))
+        wv = abs(float(omega[i0 + j]))
+        if not (a > 0 and wv > 0):
+            return 0.0, 0.0
+        noise = math.hypot(float(sigma_omega_dot[i0 + j]) / a,
+                           2.0 * float(sigma_omega[i0 + j]) / wv)
+        # + a systematic harmonic of theta of amplitude A (lens distortion about an optical
+        # centre off the axis: the circle fit of the axis cannot see it) errs omega_dot by up
+        # to A omega^2 and omega by A omega (worst phase)
+        bias = (float(bias_omega_dot[i0 + j]) / a
+                + float(opt.theta_harmonic_rad) * (wv * wv / a + 2.0))
+        return noise, bias
+
     rel_noise = rel_bias = 0.0
     if onset_idx is not None:
-        a = abs(float(omega_dot[i0 + onset_idx]))
-        wv = abs(float(omega[i0 + onset_idx]))
-        if a > 0 and wv > 0:
-            rel_noise = math.hypot(float(sigma_omega_dot[i0 + onset_idx]) / a,
-                                   2.0 * float(sigma_omega[i0 + onset_idx]) / wv)
-            # + a systematic harmonic of theta of amplitude A (lens distortion about an
-            # optical centre off the axis: the circle fit of the axis cannot see it) errs
-            # omega_dot by up to A omega^2 and omega by A omega (worst phase)
-            rel_bias = (float(bias_omega_dot[i0 + onset_idx]) / a
-                        + float(opt.theta_harmonic_rad) * (wv * wv / a + 2.0))
+        rel_noise, rel_bias = kinematic_error(onset_idx)
+    # The lower bound is set by the largest q over the stick stretch (before the best fit's
+    # onset; the whole window if it never slips): its error is that of q where q peaks there,
+    # and the largest of the noise errors over the part of the stretch whose q comes within
+    # reach of the bound, not one pointwise error (sup_noise: Rice's formula).
+    stick_end = onset_idx if onset_idx is not None else t.size
+    j_peak = int(np.argmax(q[:max(stick_end, 1)]))
+    rel_noise_lo, rel_bias_lo = kinematic_error(j_peak)
+    if onset_idx is not None and rel_noise > 0.0:
+        rel_noise_lo, rel_bias_lo = max(rel_noise_lo, rel_noise), max(rel_bias_lo, rel_bias)
+    z_lo, reach_s = z, 0.0
+    rho_q = None if omega_dot_rho is None else np.asarray(omega_dot_rho, float)
+    if rho_q is not None and rho_q.size > 1:
+        h = float(t[1] - t[0])
+        lam2 = sup_noise.second_spectral_moment(float(rho_q[1]), h)
+        sq = np.abs(q[:stick_end]) * rel_noise_lo * float(opt.kinematic_sigma_scale)
+        for _ in range(3):  # the stretch within reach depends on the quantile: fixed point
+            reach_s = h * int(np.count_nonzero(q[:stick_end] + 2.0 * z_lo * sq >= m_lo_b))
+            z_lo = max(z, sup_noise.sup_quantile(0.5 * (1.0 - level), reach_s, lam2))
 
     def widen(bound: float, sign: int) -> float:
         # q (hence every candidate mu) scales with the measured omega_dot / omega^2: a relative
-        # error e of q at the slip moves the whole profile by e. Added linearly to the profile
-        # bound (conservative: the profile and the kinematic error are not independent
-        # Gaussians), z sigma for the noise plus the truncation bound.
+        # error e of q moves the whole profile by e. Added linearly to the profile bound
+        # (conservative: the profile and the kinematic error are not independent Gaussians):
+        # z sigma for the noise (the lower bound: the sup quantile z_lo) plus the bias bound.
         # (mu >= 0: a widening past 100 % leaves the trivial lower bound 0)
-        return max(0.0, bound * (1.0 + sign * (z * rel_noise * opt.kinematic_sigma_scale
-                                               + rel_bias)))
+        if sign < 0:
+            return max(0.0, bound * (1.0 - z_lo * rel_noise_lo * opt.kinematic_sigma_scale
+                                     - rel_bias_lo))
+        return bound * (1.0 + z * rel_noise * opt.kinematic_sigma_scale + rel_bias)
 
     status = "ok"
     # A ball that may already slide at the start of the trusted region carries an unknown
@@ -336,9 +368,11 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         beta_model_high=curve(m_hi_b, m_hi_b * MU_D_RATIO[0]) if mu_high is not None else None,
         residual=residual,
         details={"ar1_rho": rho, "long_run_factor": lrf, **{
-                     k: v for k, v in noise_info.items() if k != "sigma_white_rad"}, "sigma_white_rad": math.sqrt(sig2),
+                     k: v for k, v in noise_info.items() if k != "sigma_white_rad"},
+                 "sigma_white_rad": math.sqrt(sig2),
                  "chi2_critical": crit, "profile_mu_low": m_lo_b, "profile_mu_high": m_hi_b,
                  "kinematic_rel_sigma_at_slip": rel_noise,
+                 "lower_bound_sup_z": z_lo, "lower_bound_reach_s": reach_s,
                  "kinematic_rel_bias_at_slip": rel_bias,
                  "harmonic_orders": list(opt.harmonic_orders),
                  "theta_harmonics": opt.theta_harmonics,

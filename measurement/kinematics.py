@@ -49,6 +49,8 @@ class Kinematics:
         sigma_theta: white-noise standard deviation of theta used for the error bars [rad].
         method: ``savgol`` or ``report``.
         settings: the estimator's settings (window, degree, ... with units in the key names).
+        omega_dot_rho: autocorrelation of omega_dot's noise error at lags 0, 1, ... samples
+            (its kernel applied to white theta noise); None where not known.
     """
 
     time: np.ndarray
@@ -61,6 +63,7 @@ class Kinematics:
     method: str
     settings: dict = field(default_factory=dict)
     bias_omega_dot: np.ndarray | None = None
+    omega_dot_rho: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.bias_omega_dot is None:
@@ -230,7 +233,8 @@ def savgol_kinematics(time: np.ndarray, theta: np.ndarray, *, window_s: float = 
         sigma_omega_dot=np.full(n, sigma * float(np.linalg.norm(c2))),
         trusted=trusted, sigma_theta=sigma, method="savgol",
         settings={"window_samples": window, "window_s": window * dt, "polyorder": polyorder,
-                  "trim_s": trim_s}, bias_omega_dot=bias)
+                  "trim_s": trim_s}, bias_omega_dot=bias,
+        omega_dot_rho=np.correlate(c2, c2, mode="full")[c2.size - 1:] / float(c2 @ c2))
 
 
 def report_kinematics(time: np.ndarray, theta: np.ndarray, *, decimation: int = 10,
