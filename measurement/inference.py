@@ -27,12 +27,18 @@ The profile likelihood ratio of mu against chi^2_1 at the
 stated confidence gives the set of mu the beta data allow *given* the measured kinematics.
 
 The kinematics themselves are uncertain: mu enters the model only through q, which scales with
-omega_dot / omega^2, so an error e on q at the slip is an error e on mu. Each profile bound is
-moved outwards by z times the relative 1-sigma error of q at the slip (noise of omega,
-omega_dot) plus the estimator's truncation-error bound (Richardson, ``kinematics``) plus the
-omega_dot error A omega^2 of a systematic first harmonic of theta of prior amplitude A
+omega_dot / omega^2, so an error e on q is an error e on mu. The noise part of e (omega,
+omega_dot noise; 1-sigma as the estimator states it) is a Gaussian nuisance independent of
+beta's noise, profiled out of the likelihood (:func:`scale_nuisance_bounds`): a flat-bottomed
+profile gets the full z sigma, a sharp one about the quadrature sum. For the upper bound sigma
+is q's at the slip; the lower bound is set by the largest q over the stick stretch, so its
+sigma is q's where q peaks there and its quantile the Rice sup quantile of the error over the
+part of the stretch within reach of the bound (:mod:`sup_noise`), not the pointwise z. Added
+linearly: the estimator's truncation-error bound (Richardson, ``kinematics``) and the omega_dot
+error A omega^2 of a systematic first harmonic of theta of prior amplitude A
 (``theta_harmonic_rad``: lens distortion about an optical centre off the ABU axis moves the CD
-marker along its circle; the circle fit of the axis cannot see it).
+marker along its circle; the circle fit of the axis cannot see it). mu_d's interval keeps z
+sigma added linearly (its set is taken on a coarser grid).
 
 Null bounds (``status`` says why): the data allow a ball that never slips within the trusted
 region (upper bound null); they allow a ball already slipping at its start (lower bound null);
@@ -59,6 +65,28 @@ def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...]
         if with_theta:
             cols += [np.sin(k * theta), np.cos(k * theta)]
     return np.stack(cols, axis=1)
+
+
+def scale_nuisance_bounds(mu: np.ndarray, stat: np.ndarray, budget: tuple[float, float],
+                          sigma_e: tuple[float, float]) -> tuple[float, float]:
+    """Bounds of a confidence set on mu with a Gaussian relative scale error of q profiled out.
+
+    The data of (mu, mu_d) under q (1 + e) are those of (mu, mu_d) / (1 + e) under q, and e is
+    independent of beta's noise with 1-sigma ``sigma_e``: the deviance is the profile's
+    statistic plus (e / sigma_e)^2, minimised over e. So mu is accepted if it lies within a
+    factor 1 -+ sigma_e sqrt(budget - stat(mu')) of a candidate mu' the profile accepts: a
+    flat-bottomed profile [a, b] gives [a (1 - z sigma_e), b (1 + z sigma_e)] (z^2 = budget),
+    a sharp quadratic one about the quadrature sum of the two half-widths.
+
+    Args:
+        mu: the candidates the profile accepts [1]; stat: their likelihood-ratio statistic.
+        budget: (lower, upper) deviance budgets: z^2 at the level, or a larger quantile
+            squared where the error is the largest of many (``sup_noise``).
+        sigma_e: (lower, upper) relative 1-sigma error of q [1].
+    """
+    lo = mu * (1.0 - sigma_e[0] * np.sqrt(np.maximum(budget[0] - stat, 0.0)))
+    hi = mu * (1.0 + sigma_e[1] * np.sqrt(np.maximum(budget[1] - stat, 0.0)))
+    return float(np.min(lo)), float(np.max(hi))
 
 
 def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.ndarray,
@@ -305,22 +333,22 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             reach_s = h * int(np.count_nonzero(q[:stick_end] + 2.0 * z_lo * sq >= m_lo_b))
             z_lo = max(z, sup_noise.sup_quantile(0.5 * (1.0 - level), reach_s, lam2))
 
-    def widen(bound: float, sign: int) -> float:
-        # q (hence every candidate mu) scales with the measured omega_dot / omega^2: a relative
-        # error e of q moves the whole profile by e. Added linearly to the profile bound
-        # (conservative: the profile and the kinematic error are not independent Gaussians):
-        # z sigma for the noise (the lower bound: the sup quantile z_lo) plus the bias bound.
-        # (mu >= 0: a widening past 100 % leaves the trivial lower bound 0)
-        if sign < 0:
-            return max(0.0, bound * (1.0 - z_lo * rel_noise_lo * opt.kinematic_sigma_scale
-                                     - rel_bias_lo))
-        return bound * (1.0 + z * rel_noise * opt.kinematic_sigma_scale + rel_bias)
+    # q (hence every candidate mu) scales with the measured omega_dot / omega^2: a relative
+    # noise error e of q moves the whole profile by e. e is a Gaussian nuisance independent of
+    # beta's noise, profiled out of the likelihood (scale_nuisance_bounds): a flat-bottomed
+    # profile gets the full z sigma (the lower bound: the sup quantile z_lo), a sharp one about
+    # the quadrature sum. The bias bounds (truncation, lens prior) are added linearly.
+    scale = float(opt.kinematic_sigma_scale)
+    n_lo, n_hi = scale_nuisance_bounds(mu_grid[ok], stat[ok], (z_lo * z_lo, crit),
+                                       (rel_noise_lo * scale, rel_noise * scale))
+    n_lo = max(0.0, n_lo * (1.0 - rel_bias_lo))  # mu >= 0: past 100 % the trivial bound 0
+    n_hi = n_hi * (1.0 + rel_bias)
 
     status = "ok"
     # A ball that may already slide at the start of the trusted region carries an unknown
     # speed from an unknown earlier slip (q before the region is unknown): no bound at all.
-    mu_low = None if at_start_ok else widen(m_lo_b, -1)
-    mu_high = None if (no_slip_ok or at_start_ok) else widen(m_hi_b, +1)
+    mu_low = None if at_start_ok else n_lo
+    mu_high = None if (no_slip_ok or at_start_ok) else n_hi
     if no_slip_ok and at_start_ok:
         status = "no bound: the data fit both a ball slipping from the start and one never slipping"
     elif no_slip_ok:

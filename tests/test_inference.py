@@ -222,3 +222,34 @@ def test_lower_bound_of_a_ball_stuck_on_a_plateau_of_mu_req():
           f"bound (of 20); the largest measured mu_req above q0 in {raw_above} of 20")
     assert raw_above >= 15 and bounded >= 10
     assert above <= max(1, round(0.1 * bounded))
+
+
+def test_scale_nuisance_bounds_against_closed_forms():
+    """Profiling the relative scale error e of q (1-sigma s_e) out of the deviance: a flat
+    profile on [a, b] gets the full z s_e on each side; a quadratic profile of half-width h
+    about m0 gets (to first order in h/m0, s_e) the quadrature sum z sqrt(h^2 + (s_e m0)^2);
+    without the nuisance the bounds are the profile's own; a larger budget on one side (the
+    sup quantile of the lower bound) reaches further on that side only."""
+    from measurement.inference import scale_nuisance_bounds
+
+    z = 1.959963984540054
+    crit = z * z
+    mu = np.geomspace(0.01, 0.05, 40001)
+    flat = np.where((mu >= 0.02) & (mu <= 0.03), 0.0, 99.0)
+    keep = flat <= crit
+    lo, hi = scale_nuisance_bounds(mu[keep], flat[keep], (crit, crit), (0.04, 0.04))
+    assert lo == pytest.approx(0.02 * (1 - z * 0.04), rel=1e-4)
+    assert hi == pytest.approx(0.03 * (1 + z * 0.04), rel=1e-4)
+    lo3, hi3 = scale_nuisance_bounds(mu[keep], flat[keep], (9.0, crit), (0.04, 0.04))
+    assert lo3 == pytest.approx(0.02 * (1 - 3 * 0.04), rel=1e-4) and hi3 == hi
+    m0, s_e = 0.03, 0.005
+    for h_rel in (0.002, 0.005, 0.02):          # profile 1-sigma half-width / m0
+        stat = ((mu - m0) / (h_rel * m0)) ** 2
+        keep = stat <= crit
+        lo, hi = scale_nuisance_bounds(mu[keep], stat[keep], (crit, crit), (s_e, s_e))
+        half = z * m0 * math.hypot(h_rel, s_e)
+        assert (hi - m0) == pytest.approx(half, rel=0.02)
+        assert (m0 - lo) == pytest.approx(half, rel=0.02)
+        lo0, hi0 = scale_nuisance_bounds(mu[keep], stat[keep], (crit, crit), (0.0, 0.0))
+        assert (hi0 - m0) == pytest.approx(z * h_rel * m0, abs=2e-6)   # the grid step
+        assert lo < lo0 and hi > hi0
