@@ -68,7 +68,8 @@ def _harmonic_design(theta: np.ndarray, phi: np.ndarray, orders: tuple[int, ...]
 
 
 def scale_nuisance_bounds(mu: np.ndarray, stat: np.ndarray, budget: tuple[float, float],
-                          sigma_e: tuple[float, float]) -> tuple[float, float]:
+                          sigma_e: tuple[float, float], bias: tuple[float, float] = (0.0, 0.0)
+                          ) -> tuple[float, float]:
     """Bounds of a confidence set on mu with a Gaussian relative scale error of q profiled out.
 
     The data of (mu, mu_d) under q (1 + e) are those of (mu, mu_d) / (1 + e) under q, and e is
@@ -83,10 +84,14 @@ def scale_nuisance_bounds(mu: np.ndarray, stat: np.ndarray, budget: tuple[float,
         budget: (lower, upper) deviance budgets: z^2 at the level, or a larger quantile
             squared where the error is the largest of many (``sup_noise``).
         sigma_e: (lower, upper) relative 1-sigma error of q [1].
+        bias: (lower, upper) relative bias bounds of q, added linearly [1].
+
+    Returns:
+        (lower, upper); the lower bound is 0 where the relative errors reach 100 % (mu >= 0).
     """
-    lo = mu * (1.0 - sigma_e[0] * np.sqrt(np.maximum(budget[0] - stat, 0.0)))
-    hi = mu * (1.0 + sigma_e[1] * np.sqrt(np.maximum(budget[1] - stat, 0.0)))
-    return float(np.min(lo)), float(np.max(hi))
+    lo = mu * (1.0 - sigma_e[0] * np.sqrt(np.maximum(budget[0] - stat, 0.0)) - bias[0])
+    hi = mu * (1.0 + sigma_e[1] * np.sqrt(np.maximum(budget[1] - stat, 0.0)) + bias[1])
+    return max(0.0, float(np.min(lo))), float(np.max(hi))
 
 
 def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.ndarray,
@@ -340,9 +345,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     # the quadrature sum. The bias bounds (truncation, lens prior) are added linearly.
     scale = float(opt.kinematic_sigma_scale)
     n_lo, n_hi = scale_nuisance_bounds(mu_grid[ok], stat[ok], (z_lo * z_lo, crit),
-                                       (rel_noise_lo * scale, rel_noise * scale))
-    n_lo = max(0.0, n_lo * (1.0 - rel_bias_lo))  # mu >= 0: past 100 % the trivial bound 0
-    n_hi = n_hi * (1.0 + rel_bias)
+                                       (rel_noise_lo * scale, rel_noise * scale),
+                                       (rel_bias_lo, rel_bias))
 
     status = "ok"
     # A ball that may already slide at the start of the trusted region carries an unknown

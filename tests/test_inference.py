@@ -242,6 +242,14 @@ def test_scale_nuisance_bounds_against_closed_forms():
     assert hi == pytest.approx(0.03 * (1 + z * 0.04), rel=1e-4)
     lo3, hi3 = scale_nuisance_bounds(mu[keep], flat[keep], (9.0, crit), (0.04, 0.04))
     assert lo3 == pytest.approx(0.02 * (1 - 3 * 0.04), rel=1e-4) and hi3 == hi
+    # bias bounds add linearly; relative errors past 100 % leave the trivial lower bound 0
+    # (tracks seed 38: q's noise at a slip where omega_dot ~ 0 is 540 % of q)
+    lo_b, hi_b = scale_nuisance_bounds(mu[keep], flat[keep], (crit, crit), (0.04, 0.04),
+                                       (0.02, 0.03))
+    assert lo_b == pytest.approx(0.02 * (1 - z * 0.04 - 0.02), rel=1e-4)
+    assert hi_b == pytest.approx(0.03 * (1 + z * 0.04 + 0.03), rel=1e-4)
+    assert scale_nuisance_bounds(mu[keep], flat[keep], (crit, crit), (5.4, 0.04),
+                                 (2.7, 0.0))[0] == 0.0
     m0, s_e = 0.03, 0.005
     for h_rel in (0.002, 0.005, 0.02):          # profile 1-sigma half-width / m0
         stat = ((mu - m0) / (h_rel * m0)) ** 2
