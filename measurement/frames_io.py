@@ -9,6 +9,10 @@ Accepted inputs (``read_recording``):
 * a ``.npy`` stack (N, H, W) uint8, memory-mapped (nothing is read until used);
 * any video file OpenCV can decode (converted to grayscale; lossy codecs alter the pixels).
 
+Frames may be 8- or 16-bit, grey or colour (RGB / BGR, alpha ignored): 16-bit and colour frames
+are converted to 8-bit grey on reading (:mod:`sample_formats`; the recording's ``source`` says
+what was converted). Other sample types (float, 32-bit) are refused.
+
 Every problem raises :class:`RecordingError` naming the file and, where it applies, the frame.
 A multi-page TIFF or ``.npy`` stack of 3072 frames of 256x256 reads in well under a second;
 3072 separate image files take longer than tracking them (see the benchmark).
@@ -25,6 +29,7 @@ import numpy as np
 from abu_model.atomic_io import atomic_open
 from abu_model.errors import AbuError
 
+from . import sample_formats as fmt
 from .recording_checks import (MAX_FRAMES, MAX_PIXELS, check_size, check_tiff_complete,  # noqa: F401
                                tifffile_messages)
 
@@ -36,7 +41,7 @@ VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv
 
 
 class RecordingError(AbuError):
-    """A recording (file, folder or frame in it) cannot be read or is not 8-bit grayscale."""
+    """A recording (file, folder or frame in it) cannot be read or has no usable frames."""
 
 
 @dataclass
@@ -122,9 +127,40 @@ def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
     if suffix in TIFF_SUFFIXES:
         return _read_tiff(p)
     if suffix in (".png", ".bmp"):
-        frame = _read_single_frame(p, 0, None)
-        return Recording(frame[np.newaxis], f"image file {p}", [p.name])
+        frame, colour = _read_single_frame(p, 0, None)
+        frame, note = _convert(frame[np.newaxis], was_colour=colour)
+        return Recording(frame, f"image file {p}{note}", [p.name])
     return _read_video(p)
+
+
+def _check_sample_type(dtype: np.dtype, where: str) -> None:
+    if dtype not in fmt.SAMPLE_TYPES:
+        raise RecordingError(f"{where}: frames have dtype {dtype}; expected 8- or 16-bit "
+                             "unsigned samples (uint8 or uint16), grey or colour")
+
+
+def _grey(img: np.ndarray, where: str, order: str = "BGR") -> np.ndarray:
+    """One image as grey: (H, W) as is, (H, W, 3|4) colour (``order``, alpha ignored) by luma."""
+    if img.ndim == 3 and img.shape[-1] in (3, 4):
+        _check_sample_type(img.dtype, where)
+        return fmt.luma(img, order)
+    if img.ndim != 2:
+        raise RecordingError(f"{where} is an image of shape {img.shape}; expected grey (H, W) or "
+                             "colour (H, W, 3|4)")
+    return img
+
+
+def _convert(frames: np.ndarray, *, colour_axis: bool = False,
+             order: str = "RGB", was_colour: bool = False) -> tuple[np.ndarray, str]:
+    """uint8 grey frames and the source text's conversion note ('' if none); ``colour_axis``:
+    the last axis holds colour samples to convert; ``was_colour``: converted already."""
+    if not isinstance(frames, np.ndarray) or frames.dtype not in fmt.SAMPLE_TYPES:
+        return frames, ""  # check_stack names the problem
+    colour = colour_axis and frames.shape[-1] in (3, 4)
+    if colour:
+        frames = fmt.luma(frames, order)
+    frames, note = fmt.to_uint8(frames)
+    return frames, fmt.describe(colour or was_colour, note)
 
 
 def _read_npy(p: Path, *, mmap: bool) -> Recording:
@@ -135,15 +171,18 @@ def _read_npy(p: Path, *, mmap: bool) -> Recording:
     if not isinstance(frames, np.ndarray):  # an .npz archive under a .npy name
         raise RecordingError(f"'{p}' is not a .npy array (an archive?); expected one (N, H, W) "
                              "uint8 stack")
-    if frames.ndim == 2 and frames.dtype == np.uint8:
+    if frames.ndim == 2 and frames.dtype in fmt.SAMPLE_TYPES:
         # A 2-D array would be read as one frame of N x H: almost surely a mistake.
         raise RecordingError(f"'{p}' holds an array of shape {frames.shape}; expected a stack "
                              "(N, H, W) of 8-bit frames (save one frame as shape (1, H, W))")
+    if isinstance(frames, np.ndarray):
+        _check_sample_type(frames.dtype, f"'{p}'")
+    frames, note = _convert(frames, colour_axis=frames.ndim == 4, order="RGB")
     frames = check_stack(frames, f"'{p}'")
     check_size(frames.shape, f"'{p}'")
     if not frames.flags.c_contiguous:
         frames = np.ascontiguousarray(frames)
-    return Recording(frames, f".npy stack {p}")
+    return Recording(frames, f".npy stack {p}{note}")
 
 
 def _read_tiff(p: Path) -> Recording:
@@ -162,23 +201,26 @@ def _read_tiff(p: Path) -> Recording:
                 _raise_differing_pages(p, tif)
             s = series[0]
             axes = s.axes
-            if "S" in axes:
-                raise RecordingError(f"TIFF '{p}': colour frames (axes {axes}, shape {s.shape});"
-                                     " expected 8-bit grayscale")
-            if s.dtype != np.uint8:
-                raise RecordingError(f"TIFF '{p}': frames have dtype {s.dtype}; expected 8-bit "
-                                     "grayscale (uint8)")
+            if "S" in axes and not (axes.endswith("S") and s.shape[-1] in (3, 4)):
+                raise RecordingError(f"TIFF '{p}': frames with samples on axes {axes}, shape "
+                                     f"{s.shape}; expected grey or RGB(A) pages")
+            _check_sample_type(s.dtype, f"TIFF '{p}'")
+            colour = "S" in axes
             frames = s.asarray()
     except RecordingError:
         raise
     except Exception as exc:  # tifffile raises many types on corrupt files
+        colour = False
         frames = _cv2_read_multi(p)  # e.g. LZW compression without the imagecodecs package
         if frames is None or n_pages is None or frames.shape[0] != n_pages:
             # the fallback only decodes what a checked structure describes, page for page
             raise RecordingError(f"cannot read TIFF '{p}': {' '.join(str(exc).split())}") \
                 from None
+    if colour:
+        frames = fmt.luma(frames, "RGB")
     frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
-    return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}")
+    frames, note = _convert(frames, was_colour=colour)
+    return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}{note}")
 
 
 def _raise_differing_pages(p: Path, tif) -> None:
@@ -212,23 +254,25 @@ def _cv2_read_multi(p: Path) -> np.ndarray | None:
         cv2.utils.logging.setLogLevel(level)
     if not ok or not pages:
         return None
+    pages = [_grey(page, f"TIFF '{p}': frame {i}") for i, page in enumerate(pages)]
     first = pages[0]
     for i, page in enumerate(pages):
-        if page.ndim != 2:
-            raise RecordingError(f"TIFF '{p}': frame {i} is a colour image of shape {page.shape};"
-                                 " expected 8-bit grayscale")
-        if page.dtype != np.uint8:
-            raise RecordingError(f"TIFF '{p}': frame {i} has dtype {page.dtype}; expected 8-bit "
-                                 "grayscale (uint8)")
+        _check_sample_type(page.dtype, f"TIFF '{p}': frame {i}")
+        if page.dtype != first.dtype:
+            raise RecordingError(f"TIFF '{p}': frame {i} has dtype {page.dtype}, frame 0 has "
+                                 f"{first.dtype}; all frames must match")
         if page.shape != first.shape:
             raise RecordingError(f"TIFF '{p}': frame {i} has shape {page.shape}, frame 0 has "
                                  f"shape {first.shape}; all frames must match")
     return np.stack(pages)
 
 
-def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None) -> np.ndarray:
-    """Read one grayscale uint8 frame; check it against ``shape`` (the first frame's)."""
+def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None,
+                       dtype: np.dtype | None = None) -> tuple[np.ndarray, bool]:
+    """Read one frame as grey, uint8 or uint16 (colour converted); check it against ``shape``
+    and ``dtype`` (the first frame's). Returns (frame, whether it was colour)."""
     label = f"frame {index} ('{f}')"
+    order = "BGR"  # OpenCV's
     if f.suffix.lower() in TIFF_SUFFIXES:
         import tifffile
 
@@ -238,6 +282,7 @@ def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None) -> np
                     raise RecordingError(f"{label}: a TIFF with {len(tif.pages)} pages in a "
                                          "folder of single frames; pass the file itself")
                 img = tif.pages[0].asarray()
+                order = "RGB"  # TIFF's
         except RecordingError:
             raise
         except Exception as exc:
@@ -248,15 +293,16 @@ def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None) -> np
         img = _cv2_read(f)
         if img is None:
             raise RecordingError(f"{label} is unreadable (not a valid image file)")
-    if img.ndim != 2:
-        raise RecordingError(f"{label} is a colour image of shape {img.shape}; expected 8-bit "
-                             "grayscale (H, W)")
-    if img.dtype != np.uint8:
-        raise RecordingError(f"{label} has dtype {img.dtype}; expected 8-bit grayscale (uint8)")
+    colour = img.ndim == 3 and img.shape[-1] in (3, 4)
+    img = _grey(img, label, order)
+    _check_sample_type(img.dtype, label)
+    if dtype is not None and img.dtype != dtype:
+        raise RecordingError(f"{label} has dtype {img.dtype}; frame 0 has {dtype}; all frames "
+                             "must match")
     if shape is not None and img.shape != shape:
         raise RecordingError(f"{label} has size {img.shape[1]}x{img.shape[0]} px (WxH); frame 0 "
                              f"has {shape[1]}x{shape[0]} px; all frames must match")
-    return img
+    return img, colour
 
 
 def _read_folder(p: Path) -> Recording:
@@ -272,12 +318,15 @@ def _read_folder(p: Path) -> Recording:
     if len(images) == 1 and images[0].suffix.lower() in TIFF_SUFFIXES:
         return _read_tiff(images[0])  # a single (possibly multi-page) TIFF: the stack itself
     _check_numbering(p, images)
-    first = _read_single_frame(images[0], 0, None)
-    frames = np.empty((len(images),) + first.shape, dtype=np.uint8)
+    first, colour = _read_single_frame(images[0], 0, None)
+    frames = np.empty((len(images),) + first.shape, dtype=first.dtype)
     frames[0] = first
     for i, f in enumerate(images[1:], start=1):
-        frames[i] = _read_single_frame(f, i, first.shape)
-    return Recording(frames, f"folder of {len(images)} frames {p}", [f.name for f in images])
+        frames[i], colour_i = _read_single_frame(f, i, first.shape, first.dtype)
+        colour = colour or colour_i
+    frames, note = _convert(frames, was_colour=colour)
+    return Recording(frames, f"folder of {len(images)} frames {p}{note}",
+                     [f.name for f in images])
 
 
 def _check_numbering(p: Path, images: list[Path]) -> None:

@@ -166,17 +166,22 @@ def test_too_few_corners_is_refused(tmp_path, capsys):
     # the plate has 9x6 inner corners: asking for 8x5 finds a different grid or none
     assert main(["calibrate-camera", str(views), "--pattern", "11x7", "--out", str(out)]) == 2
     assert not out.exists() and not list(tmp_path.glob(".cam.json*"))
-    # colour views, a file that is no recording, an unreadable image: named, exit 2, no file
+    # colour views are read as grey (frames_io): the same camera as from the grey views
     colour = tmp_path / "colour"
     colour.mkdir()
     for i, f in enumerate(frames):
         cv2.imwrite(str(colour / f"v{i}.png"), cv2.cvtColor(f, cv2.COLOR_GRAY2BGR))
+    grey_cam, _ = calib.calibrate_from_frames(frames, (9, 6))
+    assert main(["calibrate-camera", str(colour), "--out", str(tmp_path / "c.json")]) == 0
+    assert cam_mod.read_camera(tmp_path / "c.json").dist_coeffs[0] == \
+        pytest.approx(grey_cam.dist_coeffs[0], rel=1e-6)
+    # a file that is no recording, an unreadable image: named, exit 2, no file
     notes = tmp_path / "notes.txt"
     notes.write_text("not images")
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "v0.png").write_text("not a PNG")
-    for src, needle in ((colour, "colour"), (notes, "notes.txt"), (broken, "v0.png")):
+    for src, needle in ((notes, "notes.txt"), (broken, "v0.png")):
         capsys.readouterr()
         assert main(["calibrate-camera", str(src), "--out", str(out)]) == 2
         err = capsys.readouterr().err

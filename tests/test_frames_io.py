@@ -100,14 +100,46 @@ def test_missing_frame_number_is_named(tmp_path, stack):
         read_recording(folder)
 
 
-def test_colour_frame_is_named(tmp_path, stack):
-    folder = write_frame_folder(tmp_path / "f", stack[:4])
-    cv2.imwrite(str(folder / "frame2.png"), np.zeros((24, 32, 3), np.uint8))
-    with pytest.raises(RecordingError, match=r"frame 2 .*frame2\.png.* colour"):
-        read_recording(folder)
+def test_colour_and_sixteen_bit_recordings_are_converted(tmp_path, stack):
+    """What high-speed cameras write: 10-16 bit grey in 16-bit containers, colour (RGB TIFF,
+    BGR PNG, RGB .npy), read as the 8-bit grey frames they carry (the same pixels for grey
+    content, one shift for the whole recording), and the source says what was converted."""
+    tall = stack.astype(np.uint16) * 16 + 7          # a 12-bit camera: 0..4095
+    tifffile.imwrite(tmp_path / "g16.tif", tall, photometric="minisblack")
+    rgb = np.repeat(stack[..., None], 3, axis=-1)
+    tifffile.imwrite(tmp_path / "rgb.tif", rgb, photometric="rgb")
+    tifffile.imwrite(tmp_path / "rgb16.tif", rgb.astype(np.uint16) * 256, photometric="rgb")
+    np.save(tmp_path / "rgb.npy", rgb)
+    np.save(tmp_path / "g16.npy", tall)
+    png16 = tmp_path / "png16"
+    png16.mkdir()
+    pngc = tmp_path / "pngc"
+    pngc.mkdir()
+    for i in range(4):
+        cv2.imwrite(str(png16 / f"f{i}.png"), tall[i])
+        cv2.imwrite(str(pngc / f"f{i}.png"), rgb[i][..., ::-1])   # OpenCV writes BGR
+    expect = {"g16.tif": "right shift by 4", "rgb.tif": "colour to grey",
+              "rgb16.tif": "right shift by 8", "rgb.npy": "colour to grey",
+              "g16.npy": "right shift by 4", "png16": "right shift by 4",
+              "pngc": "colour to grey"}
+    for name, note in expect.items():
+        rec = read_recording(tmp_path / name)
+        n = len(rec)
+        assert rec.frames.dtype == np.uint8 and rec.frames.shape == (n,) + stack.shape[1:]
+        np.testing.assert_array_equal(rec.frames, stack[:n])
+        assert note in rec.source, rec.source
+    # colour weights: pure red, green and blue give the BT.601 luma of each, in either order
+    colours = np.zeros((3, 24, 32, 3), np.uint8)
+    for k in range(3):
+        colours[k, ..., k] = 200
+    np.save(tmp_path / "rgbk.npy", colours)
+    got = read_recording(tmp_path / "rgbk.npy").frames[:, 0, 0]
+    np.testing.assert_array_equal(got, np.rint(200 * np.array([0.299, 0.587, 0.114])))
+    cv2.imwrite(str(tmp_path / "red.png"), colours[0][..., ::-1])
+    assert read_recording(tmp_path / "red.png").frames[0, 0, 0] == round(200 * 0.299)
 
 
-def test_sixteen_bit_frame_is_named(tmp_path, stack):
+def test_sixteen_bit_frame_among_eight_bit_ones_is_named(tmp_path, stack):
     folder = write_frame_folder(tmp_path / "f", stack[:4])
     cv2.imwrite(str(folder / "frame1.png"), np.zeros((24, 32), np.uint16))
     with pytest.raises(RecordingError, match=r"frame 1 .*frame1\.png.* uint16.*uint8"):
@@ -125,18 +157,18 @@ def test_npy_wrong_dtype_and_shape(tmp_path):
     np.save(tmp_path / "f.npy", np.zeros((3, 8, 8), np.float32))
     with pytest.raises(RecordingError, match=r"f\.npy.*float32.*uint8"):
         read_recording(tmp_path / "f.npy")
-    np.save(tmp_path / "c.npy", np.zeros((3, 8, 8, 3), np.uint8))
-    with pytest.raises(RecordingError, match=r"c\.npy.*\(3, 8, 8, 3\).*colour"):
+    np.save(tmp_path / "c.npy", np.zeros((3, 8, 8, 5), np.uint8))   # 5 samples: no colour
+    with pytest.raises(RecordingError, match=r"c\.npy.*\(3, 8, 8, 5\)"):
         read_recording(tmp_path / "c.npy")
+    np.save(tmp_path / "i.npy", np.zeros((3, 8, 8), np.int32))
+    with pytest.raises(RecordingError, match=r"i\.npy.*int32.*uint8 or uint16"):
+        read_recording(tmp_path / "i.npy")
 
 
-def test_tiff_wrong_dtype_colour_and_differing_pages(tmp_path):
-    tifffile.imwrite(tmp_path / "d.tif", np.zeros((4, 8, 8), np.uint16), photometric="minisblack")
-    with pytest.raises(RecordingError, match=r"d\.tif.*uint16"):
+def test_tiff_wrong_dtype_and_differing_pages(tmp_path):
+    tifffile.imwrite(tmp_path / "d.tif", np.zeros((4, 8, 8), np.float32), photometric="minisblack")
+    with pytest.raises(RecordingError, match=r"d\.tif.*float32"):
         read_recording(tmp_path / "d.tif")
-    tifffile.imwrite(tmp_path / "c.tif", np.zeros((8, 8, 3), np.uint8), photometric="rgb")
-    with pytest.raises(RecordingError, match=r"c\.tif.*colour"):
-        read_recording(tmp_path / "c.tif")
     with tifffile.TiffWriter(tmp_path / "p.tif") as tw:
         tw.write(np.zeros((8, 8), np.uint8))
         tw.write(np.zeros((8, 8), np.uint8))
