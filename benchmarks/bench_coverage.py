@@ -194,8 +194,12 @@ def report(rows: list[dict], label: str) -> None:
         widths = [(r[hi_k] - r[lo_k]) / (0.5 * (r[hi_k] + r[lo_k])) for r in ok
                   if r[lo_k] is not None and r[hi_k] is not None]
         both = len(widths)
+        # how close the nearest bound comes to mu (negative: a miss), relative to mu
+        margins = [(r["mu"] - r[lo_k]) / r["mu"] for r in ok if r[lo_k] is not None] + \
+            [(r[hi_k] - r["mu"]) / r["mu"] for r in ok if r[hi_k] is not None]
         print(f"  {name}: coverage {100 * cov:.1f} % ({len(ok)}), missing mu by > 2 %: "
-              f"{sum(m > 0.02 for m in misses)}, worst miss {100 * max(misses):.1f} %; "
+              f"{sum(m > 0.02 for m in misses)}, worst miss {100 * max(misses):.1f} %, "
+              f"closest bound {100 * min(margins) if margins else float('nan'):.1f} % from mu; "
               f"both bounds in {both}: relative width median "
               f"{100 * np.median(widths) if widths else float('nan'):.1f} %, 90th percentile "
               f"{100 * np.percentile(widths, 90) if widths else float('nan'):.1f} %")
