@@ -175,11 +175,10 @@ def _read_npy(p: Path, *, mmap: bool) -> Recording:
         # A 2-D array would be read as one frame of N x H: almost surely a mistake.
         raise RecordingError(f"'{p}' holds an array of shape {frames.shape}; expected a stack "
                              "(N, H, W) of 8-bit frames (save one frame as shape (1, H, W))")
-    if isinstance(frames, np.ndarray):
-        _check_sample_type(frames.dtype, f"'{p}'")
+    _check_sample_type(frames.dtype, f"'{p}'")
+    check_size(frames.shape[:3], f"'{p}'")  # before anything is read into memory
     frames, note = _convert(frames, colour_axis=frames.ndim == 4, order="RGB")
     frames = check_stack(frames, f"'{p}'")
-    check_size(frames.shape, f"'{p}'")
     if not frames.flags.c_contiguous:
         frames = np.ascontiguousarray(frames)
     return Recording(frames, f".npy stack {p}{note}")

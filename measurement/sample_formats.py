@@ -22,12 +22,26 @@ LUMA_RGB = (0.299, 0.587, 0.114)
 SAMPLE_TYPES = (np.uint8, np.uint16)
 
 
+#: Frames converted per block (bounds the float32 temporaries of a long colour recording).
+BLOCK_FRAMES = 64
+
+
 def luma(frames: np.ndarray, order: str = "RGB") -> np.ndarray:
     """Grey frames (same dtype) from colour frames (..., C), C = 3 or 4 (alpha ignored);
     ``order`` ``RGB`` (TIFF, NumPy) or ``BGR`` (OpenCV's imread)."""
+    frames = np.asarray(frames)
     w = np.array(LUMA_RGB if order == "RGB" else LUMA_RGB[::-1], dtype=np.float32)
-    grey = np.asarray(frames)[..., :3].astype(np.float32) @ w
     top = np.iinfo(frames.dtype).max
+    if frames.ndim < 4:
+        return _luma_block(frames, w, top)
+    out = np.empty(frames.shape[:-1], dtype=frames.dtype)
+    for i in range(0, frames.shape[0], BLOCK_FRAMES):
+        out[i:i + BLOCK_FRAMES] = _luma_block(frames[i:i + BLOCK_FRAMES], w, top)
+    return out
+
+
+def _luma_block(frames: np.ndarray, w: np.ndarray, top: int) -> np.ndarray:
+    grey = frames[..., :3].astype(np.float32) @ w
     return np.clip(np.rint(grey), 0, top).astype(frames.dtype)
 
 
@@ -35,11 +49,12 @@ def to_uint8(frames: np.ndarray) -> tuple[np.ndarray, str | None]:
     """(uint8 frames, what was done or None) for uint8 or uint16 frames."""
     if frames.dtype == np.uint8:
         return frames, None  # as is (a memory map stays one)
-    a = np.asarray(frames)
-    top = int(a.max()) if a.size else 0
+    top = int(frames.max()) if frames.size else 0
     shift = max(0, top.bit_length() - 8)
-    return (a >> shift).astype(np.uint8), (f"16-bit samples (largest {top}) to 8 bits "
-                                          f"(right shift by {shift})")
+    out = np.empty(frames.shape, dtype=np.uint8)
+    for i in range(0, frames.shape[0], BLOCK_FRAMES):   # no full-size 16-bit temporary
+        out[i:i + BLOCK_FRAMES] = frames[i:i + BLOCK_FRAMES] >> shift
+    return out, f"16-bit samples (largest {top}) to 8 bits (right shift by {shift})"
 
 
 def describe(colour: bool, depth_note: str | None) -> str:

@@ -190,3 +190,21 @@ def test_failed_write_leaves_nothing(tmp_path):
     with pytest.raises(RecordingError, match="float64"):
         write_multipage_tiff(tmp_path / "bad.tif", np.zeros((2, 4, 4)))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_conversion_in_blocks_equals_the_whole_array_conversion():
+    """sample_formats converts long recordings block by block (no full-size temporaries):
+    the result over several blocks is the whole-array shift / luma, exactly."""
+    from measurement import sample_formats as fmt
+
+    rng = np.random.default_rng(0)
+    n = 2 * fmt.BLOCK_FRAMES + 3
+    tall = rng.integers(0, 4096, (n, 7, 9)).astype(np.uint16)
+    out, note = fmt.to_uint8(tall)
+    np.testing.assert_array_equal(out, (tall >> 4).astype(np.uint8))
+    assert "largest 4095" in note and "shift by 4" in note
+    rgb = rng.integers(0, 256, (n, 7, 9, 4)).astype(np.uint8)      # alpha ignored
+    w = np.array(fmt.LUMA_RGB, np.float32)
+    expect = np.clip(np.rint(rgb[..., :3].astype(np.float32) @ w), 0, 255).astype(np.uint8)
+    np.testing.assert_array_equal(fmt.luma(rgb, "RGB"), expect)
+    np.testing.assert_array_equal(fmt.luma(rgb[..., 2::-1], "BGR"), expect)
