@@ -47,6 +47,8 @@ def _plant_probes(plant_fmu: Path) -> dict[str, str]:
     """The plant's probes that the AbuBall file ``plant_fmu`` can answer."""
     return {key: ref for key, ref in _PLANT_PROBES.items()
             if key not in _OPTIONAL_PLANT_PROBES or _has_output(plant_fmu, key)}
+
+
 #: The plant's inputs T, T', T'', ... and outputs alpha, alpha', alpha'', ... of a Taylor
 #: hold (the SpeedController has the same names the other way round).
 _TORQUE_DERIVATIVES = ("torque", "torque_rate", "torque_accel", "torque_jerk", "torque_snap")
