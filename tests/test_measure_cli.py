@@ -251,3 +251,19 @@ def test_unreadable_frame_in_a_folder_exits_2(tmp_path, capsys):
     assert main(["measure", str(folder), "--out", str(out), "--seeds", "5,5;10,10;20,20"]) == 2
     assert "f003.png" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_measure_imports_no_heavy_library(tracks_csv, tmp_path):
+    """The 2 s budget of `abu measure` (issue 7): SciPy (scipy.optimize alone cost 0.33 s
+    through the lower bound's root finder), fmpy, Dask and python-control are never imported,
+    matplotlib only when plotting."""
+    import subprocess
+    import sys
+    heavy = ("scipy", "matplotlib", "fmpy", "dask", "control", "pandas")
+    code = ("import json, sys; from harness.cli import main; "
+            f"rc = main(['measure', {str(tracks_csv)!r}, '--tracks', '--out', "
+            f"{str(tmp_path / 'o')!r}, '--quiet', '--no-plots']); "
+            f"print(json.dumps([rc] + sorted(m for m in {heavy!r} if m in sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip().splitlines()[-1]
+    assert json.loads(out) == [0]
