@@ -35,6 +35,25 @@ def test_multipage_tiff_round_trip(tmp_path, stack):
     assert sorted(f.name for f in tmp_path.iterdir()) == ["rec.tif"]
 
 
+def test_contiguous_tiff_is_memory_mapped_and_other_layouts_are_read(tmp_path, stack):
+    """An uncompressed stack (our writer's, a camera's) is mapped, not copied; a compressed,
+    a big-endian 16-bit and a page-per-strip TIFF read to the same pixels."""
+    plain = read_recording(write_multipage_tiff(tmp_path / "rec.tif", stack))
+    assert isinstance(plain.frames, np.memmap)
+    np.testing.assert_array_equal(plain.frames, stack)
+    assert not isinstance(read_recording(tmp_path / "rec.tif", mmap=False).frames, np.memmap)
+    wide = stack.astype(np.uint16) << 4                  # a 12-bit camera
+    tifffile.imwrite(tmp_path / "be.tif", wide, byteorder=">")
+    tifffile.imwrite(tmp_path / "le.tif", wide)
+    tifffile.imwrite(tmp_path / "zip.tif", stack, compression="zlib")
+    tifffile.imwrite(tmp_path / "strips.tif", stack, rowsperstrip=5)
+    for name in ("be.tif", "le.tif", "zip.tif", "strips.tif"):
+        rec = read_recording(tmp_path / name)
+        np.testing.assert_array_equal(rec.frames, stack, err_msg=name)
+    assert not isinstance(read_recording(tmp_path / "be.tif").frames, np.memmap)
+    assert not isinstance(read_recording(tmp_path / "zip.tif").frames, np.memmap)
+
+
 def test_npy_round_trip_is_memory_mapped(tmp_path, stack):
     path = write_npy(tmp_path / "rec.npy", stack)
     rec = read_recording(path)
