@@ -53,6 +53,7 @@ from statistics import NormalDist
 
 from .inference_types import MU_D_RATIO, Inference, InferenceOptions  # noqa: F401 (API)
 from .noise_models import Gls as _Gls, ar1 as _ar1, leftover_whitener, long_run_factor  # noqa: F401
+from .noise_models import leftover_whitener_of
 from .noise_models import noise_level  # noqa: F401 (re-exported)
 from . import sup_noise
 from .slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
@@ -101,6 +102,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
              deviation: np.ndarray | None = None,
              record_residual: np.ndarray | None = None,
              omega_dot_rho: np.ndarray | None = None,
+             noise: dict | None = None,
              options: InferenceOptions | None = None) -> Inference:
     """Confidence sets on mu and mu_d from beta(t) and the measured kinematics.
 
@@ -120,6 +122,11 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             (``Kinematics.omega_dot_rho``): the lower bound's noise term then covers the
             largest error over the stretch that could have set it (:mod:`sup_noise`); None:
             the pointwise z sigma.
+        noise: beta's noise model as another set of the same record estimated it
+            (``details`` of its result: ``sigma_white_rad``, ``sigma_leftover_rad``,
+            ``leftover_tau_s``); with ``noise_model="leftover"`` it is used as is (the sets of
+            several kinematics windows share it, :mod:`window_sets`) and the first, white-noise
+            pass of the profile is skipped.
     """
     opt = options or InferenceOptions()
     idx = np.flatnonzero(trusted)
@@ -141,24 +148,26 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     mcache: dict = {}
 
     def models(mu: np.ndarray, mud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Model displacement rows for candidate pairs (cached; computed per distinct mu on
-        the columns from just before that mu's first onset: before it the ball sticks)."""
+        """Model displacement rows for candidate pairs (cached; computed on the columns from
+        just before the earliest first onset among the new pairs: before it the ball sticks)."""
         keys = [(float(a), float(b), t.size) for a, b in zip(mu, mud)]
         missing = sorted({k for k in keys if k not in mcache})
-        by_mu: dict = {}
-        for k in missing:
-            by_mu.setdefault(k[0], []).append(k)
-        for mu_k, ks in by_mu.items():
-            above = np.flatnonzero(q > mu_k)
-            c0 = max(int(above[0]) - 1, 0) if above.size else t.size
-            rows = np.zeros((len(ks), t.size))
-            onset = np.full(len(ks), np.inf)
+        if missing:
+            # one call for all missing pairs, on the columns from just before the earliest
+            # onset among them (the per-call overhead of many small calls cost more than the
+            # stuck columns of the later-onset rows)
+            mus = np.array([k[0] for k in missing])
+            # the first sample with q > mu is where q's running maximum first exceeds mu
+            first_above = np.searchsorted(run_max, mus, side="right")
+            c0 = max(int(first_above.min()) - 1, 0)
+            rows = np.zeros((len(missing), t.size))
+            onset = np.full(len(missing), np.inf)
             if c0 < t.size - 1:
                 disp, onset = slip_displacement(
-                    t[c0:], q[c0:], w[c0:], np.full(len(ks), mu_k),
-                    np.array([k[1] for k in ks]), s, d / l, max_episodes=opt.max_episodes)
+                    t[c0:], q[c0:], w[c0:], mus, np.array([k[1] for k in missing]), s, d / l,
+                    max_episodes=opt.max_episodes)
                 rows[:, c0:] = s * disp
-            for r, k in enumerate(ks):
+            for r, k in enumerate(missing):
                 mcache[k] = (rows[r], float(onset[r]))
         out = [mcache[k] for k in keys]
         return np.array([o[0] for o in out]), np.array([o[1] for o in out])
@@ -226,13 +235,21 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     # at least 20 ms: a ball already moving at the start must be seen to move
     n_fit = max(n_fit, min(t.size, max(2 * x.shape[1] + 40, int(round(0.02 / (t[1] - t[0]))))))
     t, th, y, w, q, x = t[:n_fit], th[:n_fit], y[:n_fit], w[:n_fit], q[:n_fit], x[:n_fit]
-    gls = _Gls(y, x, 0.0)
-    rss, rbest = profile(mu_grid, gls, ratios)
-    best = int(np.argmin(rss))
-    m_best, _ = models(mu_grid[best: best + 1], mu_grid[best: best + 1] * rbest[best: best + 1])
     rho = 0.0
     noise_info: dict = {}
-    if opt.ar_order_max >= 1:
+    reuse = noise is not None and opt.ar_order_max >= 1 and opt.noise_model == "leftover"
+    if reuse:
+        noise_info = {k: noise[k] for k in ("sigma_white_rad", "sigma_leftover_rad",
+                                             "leftover_tau_s")}
+        gls = _Gls(y, x, 0.0, leftover_whitener_of(noise_info, t.size, float(t[1] - t[0])))
+        rss, rbest = profile(mu_grid, gls, ratios)
+    else:
+        gls = _Gls(y, x, 0.0)
+        rss, rbest = profile(mu_grid, gls, ratios)
+        best = int(np.argmin(rss))
+        m_best, _ = models(mu_grid[best: best + 1],
+                           mu_grid[best: best + 1] * rbest[best: best + 1])
+    if opt.ar_order_max >= 1 and not reuse:
         fitted = gls.fit(m_best[0], x, y)
         rho = _ar1(y - fitted)
         if opt.noise_model == "leftover":
@@ -401,7 +418,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         residual=residual,
         details={"ar1_rho": rho, "long_run_factor": lrf, **{
                      k: v for k, v in noise_info.items() if k != "sigma_white_rad"},
-                 "sigma_white_rad": math.sqrt(sig2),
+                 "sigma_white_rad": math.sqrt(sig2), "noise_model": dict(noise_info),
                  "chi2_critical": crit, "profile_mu_low": m_lo_b, "profile_mu_high": m_hi_b,
                  "kinematic_rel_sigma_at_slip": rel_noise,
                  "lower_bound_sup_z": z_lo, "lower_bound_reach_s": reach_s,

@@ -65,19 +65,39 @@ def leftover_whitener(res: np.ndarray, h: float, max_tau_s: float = 0.02,
     of the leftover: alone it can report none (sigma_L = 0) where the record shows ~0.3 mrad
     over milliseconds (rendered seed 58: then a confidently wrong, 12 ms late onset).
     """
-    n = np.asarray(res).size
     sw2, sl2, tau = _leftover_params(res, h, max_tau_s)
     if record_residual is not None and np.asarray(record_residual).size > 10:
         _, sl2_r, tau_r = _leftover_params(record_residual, h, max_tau_s)
         if sl2_r > sl2:
             sl2, tau = sl2_r, tau_r
-    lag = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :]) * h
-    cov = sl2 * np.exp(-lag / tau)
-    cov[np.diag_indices(n)] += sw2
-    chol = np.linalg.cholesky(cov)
-    winv = np.linalg.inv(chol)
-    return winv, {"sigma_white_rad": math.sqrt(sw2), "sigma_leftover_rad": math.sqrt(sl2),
-                  "leftover_tau_s": tau}
+    info = {"sigma_white_rad": math.sqrt(sw2), "sigma_leftover_rad": math.sqrt(sl2),
+            "leftover_tau_s": tau}
+    return leftover_whitener_of(info, np.asarray(res).size, h), info
+
+
+_WHITENER_CACHE: dict = {}
+
+
+def leftover_whitener_of(noise: dict, n: int, h: float) -> np.ndarray:
+    """Inverse Cholesky factor of the covariance of :func:`leftover_whitener` for ``n``
+    samples of spacing ``h`` [s], from its ``noise`` info (the sigmas [rad], tau [s]).
+
+    The covariance is stationary, so the factor of n samples is the leading n x n block of the
+    factor of any longer span: the last factor computed is kept and sliced (the sets of several
+    Savitzky-Golay windows share beta's noise model; inverting it costs ~0.1 s a time).
+    """
+    key = (float(h), noise["sigma_white_rad"], noise["sigma_leftover_rad"],
+           noise["leftover_tau_s"])
+    cached = _WHITENER_CACHE.get(key)
+    if cached is None or cached.shape[0] < n:
+        sw2, sl2, tau = key[1] ** 2, key[2] ** 2, key[3]
+        lag = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :]) * h
+        cov = sl2 * np.exp(-lag / tau)
+        cov[np.diag_indices(n)] += sw2
+        cached = np.linalg.inv(np.linalg.cholesky(cov))
+        _WHITENER_CACHE.clear()
+        _WHITENER_CACHE[key] = cached
+    return cached[:n, :n]
 
 
 def long_run_factor(res: np.ndarray, lags: int) -> float:
