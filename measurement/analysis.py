@@ -27,7 +27,7 @@ from . import harmonic as harmonic_mod
 from . import inference as inference_mod
 from . import interval as interval_mod
 from . import kinematics as kin_mod
-from . import tracks_io, uncertainty
+from . import tracks_io, uncertainty, window_sets
 
 PHASES = ("ball", "cd")
 
@@ -44,6 +44,13 @@ class AnalysisOptions:
         estimator: ``savgol`` (default) or ``report`` (decimation + central difference + global
             polynomial, report sec. 5.2).
         sg_window_s, sg_polyorder: Savitzky-Golay window [s] and degree.
+        sg_extra_windows_s: longer Savitzky-Golay windows [s] whose kinematics give the
+            model-based set again; the reported set is the intersection of all windows' sets,
+            each at level 1 - alpha / K (:mod:`window_sets`). A window is left out where the
+            record cannot hold it with 40 trusted samples; () (default) or the ``report``
+            estimator: ``sg_window_s`` alone. Off by default: a longer window's own set is
+            not honest enough (its q errs along the early slip in a way the scale nuisance
+            does not cover; docs/measurement-analysis.md, "Several windows").
         decimation, poly_degree: the report estimator's block length and polynomial degree.
         trim_s: time excluded from the trusted region at each end [s]; None: 0 for ``savgol``
             (beyond its half window), 0.05 s for ``report`` (the report's own choice).
@@ -68,6 +75,7 @@ class AnalysisOptions:
     estimator: str = "savgol"
     sg_window_s: float = 0.042
     sg_polyorder: int = 9
+    sg_extra_windows_s: tuple[float, ...] = ()
     decimation: int = 10
     poly_degree: int = 10
     trim_s: float | None = None
@@ -99,6 +107,8 @@ class AnalysisOptions:
         if int(self.mc_draws) < 0:
             raise ParameterError("mc_draws", self.mc_draws, "an integer >= 0")
         check_positive("sg_window_s", self.sg_window_s, "s")
+        for w in self.sg_extra_windows_s:
+            check_positive("sg_extra_windows_s", w, "s")
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
         if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
             raise ParameterError("trim_s", self.trim_s, ">= 0 s")
@@ -121,6 +131,19 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
     return kin_mod.report_kinematics(time, theta, decimation=opt.decimation,
                                      degree=opt.poly_degree,
                                      trim_s=0.05 if opt.trim_s is None else opt.trim_s)
+
+
+def inference_windows(n_frames: int, dt: float, opt: AnalysisOptions) -> list[float]:
+    """The Savitzky-Golay windows [s] whose model-based sets are intersected: ``sg_window_s``
+    first, then each longer extra window the record holds with 40 trusted samples."""
+    windows = [float(opt.sg_window_s)]
+    if opt.estimator != "savgol":
+        return windows
+    for w in opt.sg_extra_windows_s:
+        if float(w) > windows[0] and round(float(w) / dt) + 41 <= n_frames \
+                and float(w) not in windows:
+            windows.append(float(w))
+    return windows
 
 
 def circle_centre(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -175,14 +198,24 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
     inf = None
     if infer and opt.inference is not None:
         lost_any = None if lost is None else np.asarray(lost, bool)[:, 1:].any(axis=1)
-        # beta with the lighting harmonics removed by the whole-record fit (monotone b(t) +
-        # harmonics over all revolutions): over the short inference window a free harmonic
-        # would trade off against the slip curve.
-        inf = inference_mod.infer_mu(time, theta, harm.beta_clean, kin.omega, kin.omega_dot,
-                                     kin.sigma_omega, kin.sigma_omega_dot, kin.bias_omega_dot,
-                                     trusted, l=l, d=d, direction=direction, lost=lost_any,
-                                     deviation=iv.deviation, record_residual=harm.residual,
-                                     omega_dot_rho=kin.omega_dot_rho, options=opt.inference)
+        windows = inference_windows(time.size, kin_mod.sample_interval(time), opt)
+        each = replace(opt.inference, confidence=window_sets.level_each(
+            opt.inference.confidence, len(windows)))
+        sets = []
+        for k, window in enumerate(windows):
+            kin_w = kin if k == 0 else _kinematics(time, theta, opt.with_(sg_window_s=window))
+            # beta with the lighting harmonics removed by the whole-record fit (monotone b(t)
+            # + harmonics over all revolutions): over the short inference window a free
+            # harmonic would trade off against the slip curve.
+            sets.append(inference_mod.infer_mu(
+                time, theta, harm.beta_clean, kin_w.omega, kin_w.omega_dot, kin_w.sigma_omega,
+                kin_w.sigma_omega_dot, kin_w.bias_omega_dot, kin_w.trusted, l=l, d=d,
+                direction=direction, lost=lost_any, deviation=iv.deviation,
+                record_residual=harm.residual, omega_dot_rho=kin_w.omega_dot_rho,
+                # beta's noise model is the record's, whatever the kinematics: estimated once
+                noise=sets[0].details.get("noise_model") or None if sets else None,
+                options=each))
+        inf = window_sets.intersect_sets(sets, windows, opt.inference.confidence)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}
 
 
