@@ -57,9 +57,10 @@ def intersect_sets(sets: list[Inference], windows_s: list[float], confidence: fl
     per_window = [{"sg_window_s": w, "mu_low": s.mu_low, "mu_high": s.mu_high,
                    "mu_d_low": s.mu_d_low, "mu_d_high": s.mu_d_high, "status": s.status,
                    "confidence": s.confidence} for w, s in zip(windows_s, sets)]
-    details = {**primary.details, "windows": per_window,
-               "combination": f"intersection of {len(sets)} windows' sets, each at level "
-                              f"{level_each(confidence, len(sets)):.4g} (Bonferroni)"}
+    combination = "one window" if len(sets) == 1 else \
+        f"intersection of {len(sets)} windows' sets, each at level " \
+        f"{level_each(confidence, len(sets)):.4g} (Bonferroni)"
+    details = {**primary.details, "windows": per_window, "combination": combination}
     if len(sets) == 1:
         return replace(primary, confidence=confidence, details=details)
     lost = [s for s in sets if s.status.startswith(LOST_PREFIX)]

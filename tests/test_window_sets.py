@@ -47,6 +47,16 @@ def test_intersection_takes_the_tightest_bounds_and_states_the_joint_level():
     assert "Bonferroni" in out.details["combination"]
 
 
+def test_the_default_reports_one_window_as_it_is():
+    times, x, y, ball, _ = scenario_tracks(40)
+    _, s = analyse_tracks(times, x, y, l=ball.l, d=ball.d)
+    mf = s["model_fit"]
+    assert mf["combination"] == "one window" and len(mf["windows"]) == 1
+    only = mf["windows"][0]
+    assert (only["sg_window_s"], only["confidence"]) == (0.042, 0.95)
+    assert (only["mu_low"], only["mu_high"]) == (s["mu_low"], s["mu_high"])
+
+
 def test_a_null_bound_of_one_window_is_no_constraint():
     only_low = "no slip in the trusted region: only a lower bound"
     out = intersect_sets([_set(0.02, 0.05), _set(0.03, None, only_low)], [0.042, 0.06], 0.95)
