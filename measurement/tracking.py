@@ -68,7 +68,11 @@ class TrackingOptions:
     Attributes:
         min_contrast: smallest marker contrast over the background [grey levels].
         min_snr: smallest contrast in units of the noise measured on the window border [-].
-        r_min, r_max: plausible circle radius [px]; r_max None means window/2 - 2.
+        r_min, r_max: plausible circle radius [px]; r_max None means window/2 - 2. r_min is
+            1 px: the half-peak contour of a shiny ball's specular highlight under the TL ring
+            is only 1.3-1.7 px in radius (1.5 px lost 3-8 % of the ball's frames on rendered
+            seeds 1008 and 1037); the contrast, point-count, residual and median-radius tests
+            still reject noise.
         radius_tolerance: largest deviation from the marker's median radius, as a fraction [-]
             (or 1 px, whichever is larger).
         max_jump: largest displacement from the last good position of the marker [px];
@@ -86,7 +90,7 @@ class TrackingOptions:
 
     min_contrast: float = 12.0
     min_snr: float = 6.0
-    r_min: float = 1.5
+    r_min: float = 1.0
     r_max: float | None = None
     radius_tolerance: float = 0.25
     max_jump: float | None = None
