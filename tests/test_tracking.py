@@ -223,6 +223,21 @@ def test_find_markers_roles(theta, beta):
     np.testing.assert_allclose(seeds_geo, truth, atol=0.05)
 
 
+def test_find_markers_sees_a_dim_marker_beside_a_saturated_ball():
+    """A saturated ball (contrast ~220) beside a CD marker dimmed to contrast 40 by vignetting
+    (rendered seed 149 was refused: the blobs were thresholded at a quarter of the strongest
+    peak only); the three are found with their roles."""
+    geo = CameraGeometry()
+    c, p, b = geo.marker_positions([2.2], [1.0])
+    settings = RenderSettings(background=35.0, noise_sigma=2.0, centre=MarkerStyle(6.0, 95.0),
+                              cd=MarkerStyle(4.5, 75.0), ball=MarkerStyle(5.0, 255.0),
+                              ball_shift_px=0.0)
+    frame = render_frames(c, p, b, settings, seed=2)[0]
+    seeds, roles = find_markers(frame)
+    assert roles == ["centre", "cd", "ball"]
+    np.testing.assert_allclose(seeds, np.stack([c[0], p[0], b[0]]), atol=0.1)
+
+
 def test_find_markers_dark():
     geo = CameraGeometry()
     c, p, b = geo.marker_positions([0.3], [1.0])
