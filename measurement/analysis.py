@@ -201,7 +201,7 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
         windows = inference_windows(time.size, kin_mod.sample_interval(time), opt)
         each = replace(opt.inference, confidence=window_sets.level_each(
             opt.inference.confidence, len(windows)))
-        sets = []
+        sets: list[inference_mod.Inference] = []
         for k, window in enumerate(windows):
             kin_w = kin if k == 0 else _kinematics(time, theta, opt.with_(sg_window_s=window))
             # beta with the lighting harmonics removed by the whole-record fit (monotone b(t)
@@ -213,7 +213,7 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
                 direction=direction, lost=lost_any, deviation=iv.deviation,
                 record_residual=harm.residual, omega_dot_rho=kin_w.omega_dot_rho,
                 # beta's noise model is the record's, whatever the kinematics: estimated once
-                noise=sets[0].details.get("noise_model") or None if sets else None,
+                noise=(sets[0].details.get("noise_model") or None) if sets else None,
                 options=each))
         inf = window_sets.intersect_sets(sets, windows, opt.inference.confidence)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}

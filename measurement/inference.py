@@ -51,7 +51,7 @@ import math
 import numpy as np
 from statistics import NormalDist
 
-from .inference_types import MU_D_RATIO, Inference, InferenceOptions  # noqa: F401 (API)
+from .inference_types import LOST_ACROSS_SLIP, MU_D_RATIO, Inference, InferenceOptions  # noqa: F401
 from .noise_models import Gls as _Gls, ar1 as _ar1, leftover_whitener, long_run_factor  # noqa: F401
 from .noise_models import leftover_whitener_of
 from .noise_models import noise_level  # noqa: F401 (re-exported)
@@ -385,7 +385,7 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         ta = on_lo[0] if np.isfinite(on_lo[0]) else t[0]
         tb = on_hi[0] if np.isfinite(on_hi[0]) else t[-1]
         if np.any((lost_t >= min(ta, tb) - 0.002) & (lost_t <= max(ta, tb) + 0.002)):
-            lost_note = "markers lost (interpolated) across the slip: no bound"
+            lost_note = LOST_ACROSS_SLIP
             mu_low = mu_high = None
             status = lost_note
     # mu_d is identified only when the data show a slip that starts inside the record

@@ -11,6 +11,9 @@ import numpy as np
 
 from abu_model.errors import ParameterError
 
+#: Status of a set refused because the ball or CD marker was interpolated across the slip.
+LOST_ACROSS_SLIP = "markers lost (interpolated) across the slip: no bound"
+
 #: Ratio mu_d / mu explored by the profile (the issue's family is [0.6, 1]; wider is safer).
 MU_D_RATIO = (0.3, 1.0)
 

@@ -5,9 +5,9 @@ slip, and q's error there is a trade between noise and smoothing bias that no si
 wins everywhere: a long window averages the noise of omega_dot down (its 1-sigma error falls as
 window^-2.5) but is biased across a kink of the drive, which the estimator's truncation bound
 then has to cover; a short one is nearly unbiased but noisy. Each window's set is honest on its
-own (noise bar + truncation bound + lens prior), so the sets of K windows, each at level
-1 - alpha / K, all hold mu together with probability >= 1 - alpha whatever their dependence
-(union bound): their intersection is a confidence set at the stated level 1 - alpha, and it is
+own where its error terms hold (noise bar + truncation bound + lens prior), and then the
+sets of K windows, each at level 1 - alpha / K, all hold mu together with probability
+>= 1 - alpha whatever their dependence (union bound): their intersection is a confidence set at the stated level 1 - alpha, and it is
 as sharp as the best window of each record, chosen by the data without any selection bias.
 The union bound is only as good as each set, and that is why it is off by default
 (``AnalysisOptions.sg_extra_windows_s = ()``). Measured (``benchmarks/bench_width_floor.py``,
@@ -28,9 +28,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .inference_types import Inference
-
-LOST_PREFIX = "markers lost"
+from .inference_types import LOST_ACROSS_SLIP, Inference
 
 
 def level_each(confidence: float, k: int) -> float:
@@ -63,7 +61,7 @@ def intersect_sets(sets: list[Inference], windows_s: list[float], confidence: fl
     details = {**primary.details, "windows": per_window, "combination": combination}
     if len(sets) == 1:
         return replace(primary, confidence=confidence, details=details)
-    lost = [s for s in sets if s.status.startswith(LOST_PREFIX)]
+    lost = [s for s in sets if s.status == LOST_ACROSS_SLIP]
     if lost:
         return replace(primary, mu_low=None, mu_high=None, mu_d_low=None, mu_d_high=None,
                        mu_d=None, status=lost[0].status, confidence=confidence,
