@@ -7,8 +7,9 @@ window^-2.5) but is biased across a kink of the drive, which the estimator's tru
 then has to cover; a short one is nearly unbiased but noisy. Each window's set is honest on its
 own where its error terms hold (noise bar + truncation bound + lens prior), and then the
 sets of K windows, each at level 1 - alpha / K, all hold mu together with probability
->= 1 - alpha whatever their dependence (union bound): their intersection is a confidence set at the stated level 1 - alpha, and it is
-as sharp as the best window of each record, chosen by the data without any selection bias.
+>= 1 - alpha whatever their dependence (union bound): their intersection is a confidence set
+at the stated level 1 - alpha, as sharp as the best window of each record, chosen by the data
+without any selection bias.
 The union bound is only as good as each set, and that is why it is off by default
 (``AnalysisOptions.sg_extra_windows_s = ()``). Measured (``benchmarks/bench_width_floor.py``,
 the 219 rendered recordings of ``bench_coverage.py``): 42 + 60 ms, each at 97.5 %, median
