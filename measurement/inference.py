@@ -123,10 +123,10 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
             largest error over the stretch that could have set it (:mod:`sup_noise`); None:
             the pointwise z sigma.
         noise: beta's noise model as another set of the same record estimated it
-            (``details`` of its result: ``sigma_white_rad``, ``sigma_leftover_rad``,
-            ``leftover_tau_s``); with ``noise_model="leftover"`` it is used as is (the sets of
-            several kinematics windows share it, :mod:`window_sets`) and the first, white-noise
-            pass of the profile is skipped.
+            (``details["noise_model"]`` of its result: ``sigma_white_rad``,
+            ``sigma_leftover_rad``, ``leftover_tau_s``); with ``noise_model="leftover"`` it is
+            used as is (the sets of several kinematics windows share it, :mod:`window_sets`)
+            and the first, white-noise pass of the profile is skipped.
     """
     opt = options or InferenceOptions()
     idx = np.flatnonzero(trusted)

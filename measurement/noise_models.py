@@ -75,29 +75,15 @@ def leftover_whitener(res: np.ndarray, h: float, max_tau_s: float = 0.02,
     return leftover_whitener_of(info, np.asarray(res).size, h), info
 
 
-_WHITENER_CACHE: dict = {}
-
-
 def leftover_whitener_of(noise: dict, n: int, h: float) -> np.ndarray:
     """Inverse Cholesky factor of the covariance of :func:`leftover_whitener` for ``n``
-    samples of spacing ``h`` [s], from its ``noise`` info (the sigmas [rad], tau [s]).
-
-    The covariance is stationary, so the factor of n samples is the leading n x n block of the
-    factor of any longer span: the last factor computed is kept and sliced (the sets of several
-    Savitzky-Golay windows share beta's noise model; inverting it costs ~0.1 s a time).
-    """
-    key = (float(h), noise["sigma_white_rad"], noise["sigma_leftover_rad"],
-           noise["leftover_tau_s"])
-    cached = _WHITENER_CACHE.get(key)
-    if cached is None or cached.shape[0] < n:
-        sw2, sl2, tau = key[1] ** 2, key[2] ** 2, key[3]
-        lag = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :]) * h
-        cov = sl2 * np.exp(-lag / tau)
-        cov[np.diag_indices(n)] += sw2
-        cached = np.linalg.inv(np.linalg.cholesky(cov))
-        _WHITENER_CACHE.clear()
-        _WHITENER_CACHE[key] = cached
-    return cached[:n, :n]
+    samples of spacing ``h`` [s], from its ``noise`` info (the sigmas [rad], tau [s]): the
+    sets of several Savitzky-Golay windows share beta's noise model (:mod:`window_sets`)."""
+    sw2, sl2 = noise["sigma_white_rad"] ** 2, noise["sigma_leftover_rad"] ** 2
+    lag = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :]) * h
+    cov = sl2 * np.exp(-lag / noise["leftover_tau_s"])
+    cov[np.diag_indices(n)] += sw2
+    return np.linalg.inv(np.linalg.cholesky(cov))
 
 
 def long_run_factor(res: np.ndarray, lags: int) -> float:
