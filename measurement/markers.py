@@ -185,18 +185,20 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
             message lists the candidates and asks for ``--seeds``.
     """
     img = np.asarray(frame)
-    blobs = detect_blobs(img, dark=dark, r_min=r_min, r_max=r_max)
+
+    def candidates(fraction: float) -> list[dict]:
+        found = detect_blobs(img, dark=dark, r_min=r_min, r_max=r_max, fraction=fraction)
+        return _merge_reflections(found, 14.0) if ball_reflections == 2 else found
+
+    blobs = candidates(0.25)
     if len(blobs) < 3:
         # A saturated ball's highlight (contrast ~200) puts a quarter of it above a paper
         # marker dimmed by vignetting at the frame's edge (rendered seed 149: the CD marker's
-        # contrast ~50): look again at a tenth, keeping the blobs found first and adding only
-        # candidates away from them.
+        # contrast ~50): look again at a tenth, keeping the candidates found first and adding
+        # only those away from them.
         known = [(b["x"], b["y"]) for b in blobs]
-        for b in detect_blobs(img, dark=dark, r_min=r_min, r_max=r_max, fraction=0.1):
-            if all(math.hypot(b["x"] - x, b["y"] - y) > 2.0 * r_max for x, y in known):
-                blobs.append(b)
-    if ball_reflections == 2:
-        blobs = _merge_reflections(blobs, 14.0)
+        blobs += [b for b in candidates(0.1)
+                  if all(math.hypot(b["x"] - x, b["y"] - y) > 2.0 * r_max for x, y in known)]
     hint = " Give the positions with --seeds 'x,y;x,y;x,y' (ABU centre; CD marker; ball) [px]."
     listing = "; ".join(f"({b['x']:.1f}, {b['y']:.1f}) contrast {b['contrast']:.0f}"
                         for b in blobs[:8])

@@ -238,6 +238,22 @@ def test_find_markers_sees_a_dim_marker_beside_a_saturated_ball():
     np.testing.assert_allclose(seeds, np.stack([c[0], p[0], b[0]]), atol=0.1)
 
 
+def test_find_markers_on_the_rendered_two_spot_recording_with_a_vignetted_cd_marker():
+    """Rendered seed 149 of the harsh family (two reflections on the ball, the CD marker at the
+    frame's edge): refused before ("found 2 marker candidates"); the candidates are now
+    counted after the reflections are merged, and the second look finds the CD marker."""
+    from measurement.scenario import random_scenario, render_scenario_frames, \
+        simulate_scenario
+    scn = random_scenario(149).with_(n_frames=3)
+    assert scn.lighting.reflections == 2
+    state, pos = simulate_scenario(scn)
+    frame = render_scenario_frames(scn, state, pos)[0]
+    seeds, roles = find_markers(frame, ball_reflections=2)
+    assert roles == ["centre", "cd", "ball"]
+    np.testing.assert_allclose(seeds[:2], [pos["centre"][0], pos["cd"][0]], atol=0.3)
+    np.testing.assert_allclose(seeds[2], pos["ball"][0], atol=1.0)
+
+
 def test_find_markers_dark():
     geo = CameraGeometry()
     c, p, b = geo.marker_positions([0.3], [1.0])
