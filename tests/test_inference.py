@@ -192,6 +192,28 @@ def test_rice_quantile_of_the_savgol_error_maximum_against_monte_carlo():
         assert 0.010 < rate <= 0.027, (duration, u, rate)
 
 
+def test_rice_quantile_bisection_equals_a_library_root_finder():
+    """sup_noise solves Rice's bound by bisection (scipy.optimize cost `abu measure` 0.33 s of
+    imports): the same root as SciPy's brentq over levels, durations and spectral moments, and
+    the bound at the root equals the level."""
+    from statistics import NormalDist
+
+    from scipy.optimize import brentq
+
+    from measurement import sup_noise
+    for alpha in (0.005, 0.025, 0.05):
+        z0 = NormalDist().inv_cdf(1.0 - alpha)
+        for duration in (1e-3, 0.01, 0.1, 1.0):
+            for lam2 in (1e3, 1.2e6, 1e8):
+                u = sup_noise.sup_quantile(alpha, duration, lam2)
+                ref = brentq(lambda v: sup_noise.sup_exceedance(v, duration, lam2) - alpha,
+                             z0, 40.0, xtol=1e-14)
+                assert abs(u - ref) < 1e-12, (alpha, duration, lam2, u, ref)
+                assert u > z0
+                assert abs(sup_noise.sup_exceedance(u, duration, lam2) - alpha) < 1e-12 * alpha \
+                    + 1e-15
+
+
 def test_lower_bound_of_a_ball_stuck_on_a_plateau_of_mu_req():
     """A ball that never slips while mu_req stays at q0 for the whole record (omega' = -k
     omega^2: the worst case for the noise, every frame's error can set the bound): mu_low must
