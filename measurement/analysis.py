@@ -107,6 +107,9 @@ class AnalysisOptions:
         if int(self.mc_draws) < 0:
             raise ParameterError("mc_draws", self.mc_draws, "an integer >= 0")
         check_positive("sg_window_s", self.sg_window_s, "s")
+        if not isinstance(self.sg_extra_windows_s, (tuple, list)):
+            raise ParameterError("sg_extra_windows_s", self.sg_extra_windows_s,
+                                 "a tuple of windows > 0 s")
         for w in self.sg_extra_windows_s:
             check_positive("sg_extra_windows_s", w, "s")
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")

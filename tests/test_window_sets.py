@@ -7,6 +7,9 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pytest
+
+from abu_model.errors import ParameterError
 
 from measurement.analysis import AnalysisOptions, analyse_tracks, inference_windows
 from measurement.inference_types import LOST_ACROSS_SLIP, Inference
@@ -70,6 +73,12 @@ def test_lost_markers_or_disjoint_sets_give_no_bound():
     assert (out.mu_low, out.mu_high, out.status) == (None, None, lost)
     out = intersect_sets([_set(0.02, 0.03), _set(0.04, 0.05)], [0.042, 0.06], 0.95)
     assert out.mu_low is None and out.mu_high is None and "do not overlap" in out.status
+
+
+def test_extra_windows_are_checked():
+    for bad in (0.06, (0.06, float("nan")), (0.0,), (-0.06,), (float("inf"),)):
+        with pytest.raises(ParameterError, match="sg_extra_windows_s"):
+            AnalysisOptions(sg_extra_windows_s=bad)
 
 
 def test_windows_the_record_cannot_hold_are_left_out():
