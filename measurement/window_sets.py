@@ -12,8 +12,8 @@ at the stated level 1 - alpha, as sharp as the best window of each record, chose
 without any selection bias.
 The union bound is only as good as each set, and that is why it is off by default
 (``AnalysisOptions.sg_extra_windows_s = ()``). Measured (``benchmarks/bench_width_floor.py``,
-the 219 rendered recordings of ``bench_coverage.py``): 42 + 60 ms, each at 97.5 %, median
-width 26.0 % against 34.8 % for 42 ms alone, but coverage 98.2 % with 2 misses by more than
+the 220 rendered recordings of ``bench_coverage.py``): 42 + 60 ms, each at 97.5 %, median
+width 26.1 % against 34.9 % for 42 ms alone, but coverage 98.2 % with 2 misses by more than
 2 % (rendered seed 58 by 40 %) against 100 % and none: a 60 ms window's q errs along the first
 milliseconds of slip after a kink of the drive (its error is not the constant scale the set's
 kinematic nuisance assumes), and a slip with mu_d ~ mu turns that into a misplaced onset. The
