@@ -65,127 +65,191 @@ class ReferenceResult:
     alpha_slip: float | None = None  #: right-hand alpha at the slip instant [rad/s^2]
 
 
-def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
-              t_start: float, t_end: float, y0: np.ndarray, max_step: float) -> ReferenceResult:
-    """Integrate the hybrid system driven by ``drive`` (commanded torque [N m] and x_I')."""
-    ball, tm = plant.ball, plant.tau_motor
-    k = ball.lever_ratio
-    y = np.array(y0, dtype=float)
-    mode = Mode.STICK if y[3] == 0.0 else int(math.copysign(1, y[3]))
-    times: list[float] = []
-    states: list[np.ndarray] = []
-    modes: list[int] = []
-    alphas: list[float] = []
-    switches: list[Switch] = []
+class _SegmentODE:
+    """The closed loop on one segment (drive frozen at its start): right-hand side and events.
 
-    for t_a, t_stop in _segments(breakpoints, t_start, t_end):
-        # The drive is frozen on each segment (the setpoint level at its start), so no
-        # solver stage sees the jump at the segment's end.
-        command = drive.segment(t_a)
+    The event functions are built by small factories because ``solve_ivp`` reads their
+    ``terminal`` and ``direction`` attributes (bound methods cannot carry them).
+    """
 
-        def applied(t, y):
-            return command.torque(t, y) if tm == 0.0 else y[5]
+    def __init__(self, plant: PlantParams, command: "_Segment") -> None:
+        self.plant, self.command = plant, command
+        self.tm = plant.tau_motor  # motor lag [s]; 0: the commanded torque acts directly
 
-        def record(t, y, mode):
-            times.append(t), states.append(np.array(y)), modes.append(int(mode))
-            alphas.append(accelerations(plant, applied(t, y), y[1], y[3], mode).alpha)
+    def applied(self, t: float, y: np.ndarray) -> float:
+        """Torque acting on the rotor [N m]."""
+        return self.command.torque(t, y) if self.tm == 0.0 else y[5]
 
-        def rhs_for(mode):
-            def rhs(t, y):
-                acc = accelerations(plant, applied(t, y), y[1], y[3], mode)
-                d_applied = 0.0 if tm == 0.0 else (command.torque(t, y) - y[5]) / tm
-                return [y[1], acc.alpha, y[3] if mode else 0.0, acc.beta_ddot if mode else 0.0,
-                        command.integral_rate(t, y), d_applied]
-            return rhs
+    def rhs_for(self, mode: int):
+        """d/dt of the state (theta, omega, beta, beta', x_I, applied torque) in ``mode``."""
+        plant, command, tm = self.plant, self.command, self.tm
 
-        def stick_margin(sign):
-            def g(t, y):
-                return ball.mu * y[1] ** 2 - sign * k * applied(t, y) / plant.J_total
-            g.terminal, g.direction = True, -1
-            return g
+        def rhs(t, y):
+            acc = accelerations(plant, self.applied(t, y), y[1], y[3], mode)
+            d_applied = 0.0 if tm == 0.0 else (command.torque(t, y) - y[5]) / tm
+            return [y[1], acc.alpha, y[3] if mode else 0.0, acc.beta_ddot if mode else 0.0,
+                    command.integral_rate(t, y), d_applied]
+        return rhs
 
-        def torque_rate(t, y, alpha):
-            """dT/dt of the commanded torque [N m/s] (segment's closed form if it has one)."""
-            rate = getattr(command, "torque_rate", None)
-            if rate is not None:
-                return rate(t, y, alpha)
-            e = 1e-7 * max(1.0, abs(t))  # central difference along the trajectory
-            f = rhs_for(Mode.STICK)(t, y)
-            return (command.torque(t + e, y + e * np.asarray(f))
-                    - command.torque(t - e, y - e * np.asarray(f))) / (2.0 * e)
+    def stick_margin(self, sign: float):
+        """Terminal event: mu omega^2 - sign (l - d/5)/l alpha falls through 0 (stick ends)."""
+        plant, k = self.plant, self.plant.ball.lever_ratio
+
+        def g(t, y):
+            return plant.ball.mu * y[1] ** 2 - sign * k * self.applied(t, y) / plant.J_total
+        g.terminal, g.direction = True, -1
+        return g
+
+    def torque_rate(self, t: float, y: np.ndarray, alpha: float) -> float:
+        """dT/dt of the commanded torque [N m/s] (segment's closed form if it has one)."""
+        command = self.command
+        rate = getattr(command, "torque_rate", None)
+        if rate is not None:
+            return rate(t, y, alpha)
+        e = 1e-7 * max(1.0, abs(t))  # central difference along the trajectory
+        f = self.rhs_for(Mode.STICK)(t, y)
+        return (command.torque(t + e, y + e * np.asarray(f))
+                - command.torque(t - e, y - e * np.asarray(f))) / (2.0 * e)
+
+    def peak(self):
+        """Non-terminal event: the maxima of mu_req in stick."""
+        plant, command, tm = self.plant, self.command, self.tm
 
         def peak(t, y):
             # d(mu_req)/dt in stick has the sign of alpha (alpha' omega - 2 alpha^2) omega:
             # its falls through 0 are the maxima of mu_req between solver points.
-            alpha = applied(t, y) / plant.J_total
-            d_alpha = (torque_rate(t, y, alpha) if tm == 0.0
+            alpha = self.applied(t, y) / plant.J_total
+            d_alpha = (self.torque_rate(t, y, alpha) if tm == 0.0
                        else (command.torque(t, y) - y[5]) / tm) / plant.J_total
             return alpha * (d_alpha * y[1] - 2.0 * alpha * alpha) * y[1]
         peak.terminal, peak.direction = False, -1
+        return peak
 
-        def slip_stop(direction):
-            def g(t, y):
-                return direction * y[3]
-            g.terminal, g.direction = True, -1
-            return g
+    @staticmethod
+    def slip_stop(direction: int):
+        """Terminal event: the slip speed beta' returns to 0."""
+        def g(t, y):
+            return direction * y[3]
+        g.terminal, g.direction = True, -1
+        return g
 
-        def switch(t, y, new):
-            nonlocal mode
-            switches.append(Switch(float(t), int(mode), int(new)))
-            mode = new
-            record(t, y, mode)
-            if len(switches) > 10000:
-                raise SimulationError("more than 10000 stick/slip switches: chattering")
 
-        t = t_a
-        record(t, y, mode)  # right limit at the segment start
-        while t < t_stop:
-            if mode == Mode.STICK and not stick_holds(plant, applied(t, y), y[1]):
-                switch(t, y, slip_direction(plant, applied(t, y)))
-                continue
-            events = ([stick_margin(1.0), stick_margin(-1.0), peak] if mode == Mode.STICK
-                      else [slip_stop(mode)])
-            # An explicit first step: SciPy's automatic one can be below the spacing of t
-            # (beta' = 0 with atol 1e-13), which re-fires the slip-stop event at t forever.
-            first = min(t_stop - t, max_step, max(1e-10, 64 * np.spacing(abs(t))))
-            sol = solve_ivp(rhs_for(mode), (t, t_stop), y, method="DOP853", rtol=RTOL,
-                            atol=ATOL, events=events, max_step=max_step, first_step=first)
-            if not sol.success:
-                raise SimulationError(f"reference integration failed at t = {t:.9g} s: "
-                                      f"{sol.message}")
-            hits = [(te[0], ye[0]) for te, ye, ev in zip(sol.t_events, sol.y_events, events)
-                    if te.size and ev.terminal]
-            t_next = min(h[0] for h in hits) if hits else t_stop
-            points = list(zip(sol.t, sol.y.T))
-            if mode == Mode.STICK:  # the maxima of mu_req between solver points
-                points += list(zip(sol.t_events[2], sol.y_events[2]))
-                points.sort(key=lambda point: point[0])
-            for ti, yi in points:
-                if t < ti < t_next:
-                    record(ti, yi, mode)
-            if not hits:
-                t, y = t_stop, sol.y[:, -1].copy()
-                record(t, y, mode)  # left limit at the segment end
-                break
-            t_hit, y_hit = min(hits, key=lambda item: item[0])
-            t, y = float(t_hit), np.array(y_hit, dtype=float)
-            record(t, y, mode)
-            if mode == Mode.STICK:
-                switch(t, y, slip_direction(plant, applied(t, y)))
-            else:
-                y[3] = 0.0
-                switch(t, y, Mode.STICK if stick_holds(plant, applied(t, y), y[1])
-                       else slip_direction(plant, applied(t, y)))
+class _Trajectory:
+    """The recorded points and switches of a reference run."""
 
-    Y = np.array(states)
-    alpha = np.array(alphas)
-    mm = np.array(modes)
-    mu_req = np.array([mu_required(ball, a, w) for a, w in zip(alpha, Y[:, 1])])
-    result = ReferenceResult(np.array(times), Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], alpha, mm,
-                             mu_req, switches)
-    later = [b for b in breakpoints if b > t_start]
-    _bounds(result, min(later) if later else None)
-    return result
+    def __init__(self, plant: PlantParams) -> None:
+        self.plant = plant
+        self.times: list[float] = []
+        self.states: list[np.ndarray] = []
+        self.modes: list[int] = []
+        self.alphas: list[float] = []
+        self.switches: list[Switch] = []
+
+    def record(self, ode: _SegmentODE, t: float, y: np.ndarray, mode: int) -> None:
+        self.times.append(t), self.states.append(np.array(y)), self.modes.append(int(mode))
+        self.alphas.append(accelerations(self.plant, ode.applied(t, y), y[1], y[3], mode).alpha)
+
+    def switch(self, ode: _SegmentODE, t: float, y: np.ndarray, mode: int, new: int) -> int:
+        """Record a switch from ``mode`` to ``new`` at t [s]; returns the new mode."""
+        self.switches.append(Switch(float(t), int(mode), int(new)))
+        self.record(ode, t, y, new)
+        if len(self.switches) > 10000:
+            raise SimulationError("more than 10000 stick/slip switches: chattering")
+        return new
+
+    def result(self, breakpoints: Sequence[float], t_start: float) -> ReferenceResult:
+        Y = np.array(self.states)
+        alpha = np.array(self.alphas)
+        mm = np.array(self.modes)
+        ball = self.plant.ball
+        mu_req = np.array([mu_required(ball, a, w) for a, w in zip(alpha, Y[:, 1])])
+        result = ReferenceResult(np.array(self.times), Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3],
+                                 alpha, mm, mu_req, self.switches)
+        later = [b for b in breakpoints if b > t_start]
+        _bounds(result, min(later) if later else None)
+        return result
+
+
+def _solve_to_event(ode: _SegmentODE, mode: int, t: float, t_stop: float, y: np.ndarray,
+                    max_step: float):
+    """(solution, terminal event hits [(t, y)]) of one ``solve_ivp`` run from t [s] in mode."""
+    events = ([ode.stick_margin(1.0), ode.stick_margin(-1.0), ode.peak()]
+              if mode == Mode.STICK else [ode.slip_stop(mode)])
+    # An explicit first step: SciPy's automatic one can be below the spacing of t
+    # (beta' = 0 with atol 1e-13), which re-fires the slip-stop event at t forever.
+    first = min(t_stop - t, max_step, max(1e-10, 64 * np.spacing(abs(t))))
+    sol = solve_ivp(ode.rhs_for(mode), (t, t_stop), y, method="DOP853", rtol=RTOL,
+                    atol=ATOL, events=events, max_step=max_step, first_step=first)
+    if not sol.success:
+        raise SimulationError(f"reference integration failed at t = {t:.9g} s: "
+                              f"{sol.message}")
+    hits = [(te[0], ye[0]) for te, ye, ev in zip(sol.t_events, sol.y_events, events)
+            if te.size and ev.terminal]
+    return sol, hits
+
+
+def _record_between(traj: _Trajectory, ode: _SegmentODE, sol, mode: int, t: float,
+                    t_next: float) -> None:
+    """Record the solver points strictly between t and t_next [s] (and, in stick, the maxima
+    of mu_req between them)."""
+    points = list(zip(sol.t, sol.y.T))
+    if mode == Mode.STICK:  # the maxima of mu_req between solver points
+        points += list(zip(sol.t_events[2], sol.y_events[2]))
+        points.sort(key=lambda point: point[0])
+    for ti, yi in points:
+        if t < ti < t_next:
+            traj.record(ode, ti, yi, mode)
+
+
+def _land_on_event(traj: _Trajectory, ode: _SegmentODE, hits: list, mode: int
+                   ) -> tuple[float, np.ndarray, int]:
+    """(t [s], state, new mode) after switching at the first terminal event."""
+    plant = ode.plant
+    t_hit, y_hit = min(hits, key=lambda item: item[0])
+    t, y = float(t_hit), np.array(y_hit, dtype=float)
+    traj.record(ode, t, y, mode)
+    if mode == Mode.STICK:
+        mode = traj.switch(ode, t, y, mode, slip_direction(plant, ode.applied(t, y)))
+    else:
+        y[3] = 0.0
+        new = Mode.STICK if stick_holds(plant, ode.applied(t, y), y[1]) \
+            else slip_direction(plant, ode.applied(t, y))
+        mode = traj.switch(ode, t, y, mode, new)
+    return t, y, mode
+
+
+def _integrate_segment(traj: _Trajectory, ode: _SegmentODE, t_a: float, t_stop: float,
+                       y: np.ndarray, mode: int, max_step: float) -> tuple[np.ndarray, int]:
+    """Integrate [t_a, t_stop] [s] through every switch; returns (end state, mode)."""
+    t = t_a
+    traj.record(ode, t, y, mode)  # right limit at the segment start
+    while t < t_stop:
+        if mode == Mode.STICK and not stick_holds(ode.plant, ode.applied(t, y), y[1]):
+            mode = traj.switch(ode, t, y, mode, slip_direction(ode.plant, ode.applied(t, y)))
+            continue
+        sol, hits = _solve_to_event(ode, mode, t, t_stop, y, max_step)
+        t_next = min(h[0] for h in hits) if hits else t_stop
+        _record_between(traj, ode, sol, mode, t, t_next)
+        if not hits:
+            t, y = t_stop, sol.y[:, -1].copy()
+            traj.record(ode, t, y, mode)  # left limit at the segment end
+            break
+        t, y, mode = _land_on_event(traj, ode, hits, mode)
+    return y, mode
+
+
+def _simulate(plant: PlantParams, drive: "_Drive", breakpoints: Sequence[float],
+              t_start: float, t_end: float, y0: np.ndarray, max_step: float) -> ReferenceResult:
+    """Integrate the hybrid system driven by ``drive`` (commanded torque [N m] and x_I')."""
+    y = np.array(y0, dtype=float)
+    mode = Mode.STICK if y[3] == 0.0 else int(math.copysign(1, y[3]))
+    traj = _Trajectory(plant)
+    for t_a, t_stop in _segments(breakpoints, t_start, t_end):
+        # The drive is frozen on each segment (the setpoint level at its start), so no
+        # solver stage sees the jump at the segment's end.
+        ode = _SegmentODE(plant, drive.segment(t_a))
+        y, mode = _integrate_segment(traj, ode, t_a, t_stop, y, mode, max_step)
+    return traj.result(breakpoints, t_start)
 
 
 def _segments(breakpoints: Sequence[float], t_start: float, t_end: float):

@@ -72,7 +72,7 @@ def staircase_family(n: int, seed: int):
 
 def run_family(exe: Path, n: int, tmp: Path) -> bool:
     from fmus.ssp import Experiment, write_ssp
-    from harness.experiments import ensure_fmus
+    from harness.experiments.staircase import ensure_fmus
 
     delays, rels, bad = [], [], 0
     for i, (exp, ref) in enumerate(staircase_family(n, seed=9)):
@@ -104,8 +104,9 @@ def main() -> int:
     args = ap.parse_args()
 
     from fmus.ssp import read_default_experiment
-    from harness.cli import build_parser, main as abu, staircase_from_args
-    from harness.experiments import run_staircase
+    from abu.cli.main import build_parser, main as abu
+    from abu.cli.options_cosim import staircase_from_args
+    from harness.experiments.staircase import run_staircase
 
     with tempfile.TemporaryDirectory(prefix="bench_c_host_") as tmp:
         tmp_path = Path(tmp)

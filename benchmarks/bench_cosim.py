@@ -27,9 +27,9 @@ from fmpy import read_model_description
 from abu_model.params import PlantParams
 from abu_model.reference import simulate_staircase_reference
 from fmus.build import build_fmus
-from harness.experiments import StaircaseExperiment, run_staircase
-from harness.fmi import extracted
-from harness.stepping import DEFAULT_TOL
+from harness.experiments.staircase import StaircaseExperiment, run_staircase
+from harness.cosim.fmi import extracted
+from harness.cosim.stepping import DEFAULT_TOL
 
 HZ = 2.0 * math.pi
 
@@ -98,7 +98,7 @@ def plain_master(exp: StaircaseExperiment, fmus: dict, h: float) -> dict:
     elapsed = time.perf_counter() - start
     for slave in slaves.values():
         slave.terminate()
-        slave.fmi2FreeInstance(slave.component)  # no dlclose (see harness/master.py)
+        slave.fmi2FreeInstance(slave.component)  # no dlclose (see harness/cosim/master.py)
     return {"time": elapsed, "mu_low": mu_low, "mu_high": mu_high, "t_slip": t_slip,
             "steps": n}
 

@@ -1,6 +1,6 @@
 """Coverage of the stated confidence interval on mu over the harsh twin's random family.
 
-For each seed: ``measurement.scenario.random_scenario(seed)`` (the family of ``abu render
+For each seed: ``twin.scenario.random_scenario(seed)`` (the family of ``abu render
 --scenario random``: drives, optics, lighting incl. the two-reflection lighting, mu in
 [0.005, 0.06], mu_d/mu in [0.6, 1]) is simulated and rendered to raw frames (``.npy``), then
 ``abu measure`` runs on the frames in this process (default settings, ``--no-plots``; two-
@@ -15,7 +15,7 @@ reflection recordings with ``--ball-reflections 2`` as their ``meta.json`` says)
   omega_dot (and against noise + truncation bound);
 * seconds per recording (render and measure apart);
 * with ``--camera``: per recording the chessboard views of its optics are rendered
-  (``measurement.calibration_target``), ``abu calibrate-camera`` fits the lens and ``abu
+  (``twin.calibration_target``), ``abu calibrate-camera`` fits the lens and ``abu
   measure --camera`` undistorts the tracks; printed beside: median |k1 error|, reprojection
   RMS, seconds, and the first harmonic of theta's error (measured - truth) against the prior
   bound the measurement used (the calibration's, or the family's 8e-4 rad without camera).
@@ -44,12 +44,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from harness.cli import main as abu_main  # noqa: E402
-from measurement import kinematics as kin_mod  # noqa: E402
-from measurement.analysis import AnalysisOptions  # noqa: E402
-from measurement.calibration_target import DEFAULT_VIEWS, render_views  # noqa: E402
-from measurement.inference import InferenceOptions  # noqa: E402
-from measurement.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
+from abu.cli.main import main as abu_main  # noqa: E402
+from measurement.kinematics import estimators as kin_mod  # noqa: E402
+from measurement.inference.analysis import AnalysisOptions  # noqa: E402
+from twin.calibration_target import DEFAULT_VIEWS, render_views  # noqa: E402
+from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
+from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
 
 #: theta's harmonic prior without a camera file (the family prior).
@@ -317,7 +317,7 @@ def main() -> None:
                   f"{row['mu']:.5f} -> [{row.get('mu_low')}, {row.get('mu_high')}] "
                   f"{row.get('status', row.get('error'))} ({row['render_s']:.1f} + "
                   f"{row['measure_s']:.1f} s)", flush=True)
-    print(f"\nfamily: measurement.scenario.random_scenario(seed), seeds {args.first}.."
+    print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {args.first}.."
           f"{args.first + args.n - 1} (+{args.two_spot} forced two-spot), {args.size} px, "
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"

@@ -21,8 +21,8 @@ import time
 from abu_model.params import PlantParams
 from controller.drive import Drive
 from fmus.build import build_fmus
-from harness.design import DesignSpec, check_design, design_staircase
-from harness.experiments import StaircaseExperiment, run_staircase
+from harness.planning.design import DesignSpec, check_design, design_staircase
+from harness.experiments.staircase import StaircaseExperiment, run_staircase
 
 HZ = 2.0 * math.pi
 CASES = [((2.75e-3, 6 * 2.75e-3), Drive()),

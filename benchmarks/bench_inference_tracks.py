@@ -1,10 +1,10 @@
 """Coverage of the model-based set ALONE (summary ``model_fit``) on the tracks-level family.
 
-The family of ``tests/test_inference.py`` (harsh-twin drives of ``measurement.scenario``
+The family of ``tests/test_inference.py`` (harsh-twin drives of ``twin.scenario``
 simulated on the exact plant, camera geometry, white tracking noise and a lighting shift of the
 ball's apparent centre with harmonics 1-3 of its angle), fast (~0.3-0.5 s a recording), for
-trying noise models of :mod:`measurement.inference` before the rendered benchmark
-(``bench_coverage.py``). Options of :class:`measurement.inference.InferenceOptions` as JSON.
+trying noise models of :mod:`measurement.inference.infer_mu` before the rendered benchmark
+(``bench_coverage.py``). Options of :class:`measurement.inference.infer_mu.InferenceOptions` as JSON.
 
 Run::
 
@@ -26,8 +26,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import numpy as np  # noqa: E402
 
-from measurement.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
-from measurement.inference import InferenceOptions  # noqa: E402
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
+from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from test_inference import scenario_tracks  # noqa: E402
 
 

@@ -14,9 +14,9 @@ noise bars do not hold. z is recomputed with that harmonic (fitted from the trut
 removed from theta, to show how much of the excess it explains.
 
 With ``--camera`` (the check of ``abu measure --camera``'s prior): per seed the chessboard
-views of the scenario's optics are rendered (``measurement.calibration_target``), the camera is
-calibrated (``measurement.camera``) and the tracks are undistorted and given the calibration's
-theta-harmonic prior exactly as ``abu measure --camera`` does (``cli_camera.apply_camera``); the
+views of the scenario's optics are rendered (``twin.calibration_target``), the camera is
+calibrated (``measurement.imaging.camera``) and the tracks are undistorted and given the calibration's
+theta-harmonic prior exactly as ``abu measure --camera`` does (``measurement.imaging.camera.undistort_tracks``); the
 first harmonic of theta's error left after undistortion is compared with that prior (it should
 hold in >= 90 %).
 
@@ -37,17 +37,19 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
+from dataclasses import replace
+
 import numpy as np  # noqa: E402
 
-from measurement import kinematics as kin_mod  # noqa: E402
-from measurement.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
-from measurement.slip_model import signed_mu_req  # noqa: E402
+from measurement.kinematics import estimators as kin_mod  # noqa: E402
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
+from measurement.inference.slip_model import signed_mu_req  # noqa: E402
 from test_inference import scenario_tracks  # noqa: E402
-from measurement.calibration_target import render_views  # noqa: E402
-from measurement.camera import read_camera, write_camera  # noqa: E402
-from measurement.camera_calibration import calibrate_from_frames  # noqa: E402
-from measurement.cli_camera import apply_camera  # noqa: E402
-from measurement.scenario import random_scenario  # noqa: E402
+from twin.calibration_target import render_views  # noqa: E402
+from measurement.imaging.camera import read_camera, write_camera  # noqa: E402
+from measurement.imaging.camera_calibration import calibrate_from_frames  # noqa: E402
+from measurement.imaging.camera import undistort_tracks  # noqa: E402
+from twin.scenario import random_scenario  # noqa: E402
 
 
 def main() -> None:
@@ -70,9 +72,9 @@ def main() -> None:
             cam, _ = calibrate_from_frames(frames, (9, 6))
             write_camera(tmp / "cam.json", cam)
             cam = read_camera(tmp / "cam.json")  # as abu measure --camera reads it
-            x, y, run_opt, info = apply_camera(str(tmp / "cam.json"), cam, x, y,
-                                               (scn.width, scn.height), opt)
-            prior = info["theta_harmonic_prior"]["theta_harmonic_rad"]
+            x, y, prior, info = undistort_tracks(str(tmp / "cam.json"), cam, x, y,
+                                                 (scn.width, scn.height))
+            run_opt = replace(opt, inference=replace(opt.inference, theta_harmonic_rad=prior))
         else:
             prior = opt.inference.theta_harmonic_rad
         tab, s = analyse_tracks(times, x, y, l=ball.l, d=ball.d, options=run_opt)

@@ -1,6 +1,6 @@
 """Whole-process time of ``abu measure`` on one 3072-frame recording, and where the time goes.
 
-Renders one recording of the harsh twin (``measurement.scenario.random_scenario(seed)``, 256 px,
+Renders one recording of the harsh twin (``twin.scenario.random_scenario(seed)``, 256 px,
 3072 frames) as a multi-page TIFF, then times ``abu measure REC --out DIR`` with its default
 settings as a fresh process (imports, read, track, analyse, uncertainty, plots), pinned to one
 core (``taskset -c 0`` when available) -- median of ``--repeat`` (default 5) runs. The same
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 def abu_cmd() -> list[str]:
     exe = Path(sys.executable).with_name("abu")
-    base = [str(exe)] if exe.exists() else [sys.executable, "-m", "harness.cli"]
+    base = [str(exe)] if exe.exists() else [sys.executable, "-m", "abu.cli.main"]
     if shutil.which("taskset"):
         base = ["taskset", "-c", "0"] + base
     return base
@@ -48,7 +48,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
-    from measurement.scenario import random_scenario, render_scenario
+    from twin.scenario import random_scenario, render_scenario
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -70,13 +70,13 @@ def main() -> None:
               f"(runs {', '.join(f'{t:.2f}' for t in noplot)}); plots cost "
               f"{statistics.median(whole) - statistics.median(noplot):.2f} s")
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "import harness.cli"], check=True)
-        print(f"  'import harness.cli' alone: {time.perf_counter() - t0:.2f} s (fresh process)")
+        subprocess.run([sys.executable, "-c", "import abu.cli.main"], check=True)
+        print(f"  'import abu.cli.main' alone: {time.perf_counter() - t0:.2f} s (fresh process)")
 
         # where the time goes: one in-process run under cProfile (imports included)
         prof = cProfile.Profile()
         prof.enable()
-        from harness.cli import main as abu_main
+        from abu.cli.main import main as abu_main
         abu_main(["measure", str(rec), "--out", str(tmp / "out2"), "--quiet"] + refl)
         prof.disable()
         st = pstats.Stats(prof)

@@ -5,7 +5,7 @@ checkout of the project timed in the same run.
     python benchmarks/bench_table41.py --base /tmp/base [--pairs N]
 
 Each timing is a fresh Python process (``sys.path`` set to one checkout) that builds the FMUs
-untimed, then times ``harness.table41.table41`` for mu = k 2.75e-3, k = 1..6 (12
+untimed, then times ``harness.experiments.table41.table41`` for mu = k 2.75e-3, k = 1..6 (12
 co-simulations including loading the FMUs). The two checkouts alternate for N pairs (default
 5); the script prints both medians and the median of the pair ratios. Without ``--base`` only
 this checkout is timed.
@@ -26,7 +26,7 @@ CHILD = r"""
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 from fmus.build import build_fmus
-from harness.table41 import table41
+from harness.experiments.table41 import table41
 fmus = build_fmus(sys.argv[2])
 start = time.perf_counter()
 rows = table41([k * 2.75e-3 for k in range(1, 7)], fmu_dir=sys.argv[2])

@@ -3,7 +3,7 @@ a plain OpenCV moments tracker measured in the same run; reading a recording tim
 
     python3 benchmarks/bench_tracking.py [--frames 3072] [--repeats 3] [--folder]
 
-The recording is rendered by measurement.render (3072 frames of 256x256 px, three markers, the
+The recording is rendered by twin.render (3072 frames of 256x256 px, three markers, the
 report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the
 true centres is printed too. One core: the process is pinned to one CPU and every thread pool
 (OpenCV, OpenBLAS, OpenMP) is set to one thread.
@@ -23,10 +23,10 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from measurement.frames_io import (read_recording, write_frame_folder,  # noqa: E402
+from measurement.imaging.frames_io import (read_recording, write_frame_folder,  # noqa: E402
                                    write_multipage_tiff, write_npy)
-from measurement.render import CameraGeometry, RenderSettings, render_frames  # noqa: E402
-from measurement.tracking import METHODS, track_recording  # noqa: E402
+from twin.render import CameraGeometry, RenderSettings, render_frames  # noqa: E402
+from measurement.imaging.tracking import METHODS, track_recording  # noqa: E402
 
 CAMERA_FPS = 4500.0
 
@@ -153,8 +153,8 @@ def bench_two_reflections(repeats: int, seed: int = 12) -> None:
     """The harsh twin's two-spot recording (3072 frames, 256 px): tracking with
     --ball-reflections 2 (outline, pair) against the default tracker on the same frames,
     alternated, median of ``repeats`` pairs; accuracy of the ball centre against the truth."""
-    from measurement.reflections import track_with_reflections
-    from measurement.scenario import random_scenario, render_scenario_frames, simulate_scenario
+    from measurement.imaging.reflections import track_with_reflections
+    from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario
 
     scn = random_scenario(seed, lighting="two_spot")
     st, pos = simulate_scenario(scn)

@@ -3,7 +3,7 @@ kinematics, with longer Savitzky-Golay windows, and given the exact ABU motion (
 camera has), on the rendered family of ``bench_coverage.py``.
 
 Issue 7 asks for a median relative width <= 5 %. Each recording of
-``measurement.scenario.random_scenario(seed)`` (seeds ``--first`` .. ``--first + --n - 1``
+``twin.scenario.random_scenario(seed)`` (seeds ``--first`` .. ``--first + --n - 1``
 plus ``--two-spot`` forced two-reflection ones, as ``bench_coverage.py`` draws them) is
 rendered and tracked once (``abu track``, ``--ball-reflections 2`` where meta says so); then
 the same tracks are analysed several ways:
@@ -44,13 +44,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from harness.cli import main as abu_main  # noqa: E402
-from measurement import analysis  # noqa: E402
-from measurement.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
-from measurement.inference import InferenceOptions  # noqa: E402
-from measurement.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
+from abu.cli.main import main as abu_main  # noqa: E402
+from measurement.inference import analysis  # noqa: E402
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
+from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
+from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
-from measurement.tracks_io import read_tracks_csv  # noqa: E402
+from measurement.imaging.tracks_io import read_tracks_csv  # noqa: E402
 
 MEASURED_KINEMATICS = analysis._kinematics
 

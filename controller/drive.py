@@ -6,7 +6,7 @@ standard library (it may be vendored into an FMU), except the shared error type 
 
 The file is one JSON object (SI units, the unit in each key)::
 
-    {"kind": "abu-drive", "version": 1,
+    {"kind": "abu-drive", "format_version": 1,
      "model": "second-order" | "pi-lag" | "pi-lag-weighted",
      "theta_ref_mode": "integral",
      "zeta": 0.7, "omega_n_rad_s": 12.0, "tau_motor_s": 0.02, "setpoint_weight": 1.0,
@@ -107,7 +107,7 @@ class Drive:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of the file (see the module docstring)."""
-        out: dict[str, Any] = {"kind": KIND, "version": VERSION, "model": self.model,
+        out: dict[str, Any] = {"kind": KIND, "format_version": VERSION, "model": self.model,
                                "theta_ref_mode": self.theta_ref_mode, "zeta": self.zeta,
                                "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
                                "setpoint_weight": self.setpoint_weight}
@@ -135,9 +135,11 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
     if obj.get("kind") != KIND:
         raise DriveFileError(source, f"expected {KIND!r} (a drive written by 'abu identify'), "
                                      f"got {obj.get('kind')!r}", "kind")
-    if obj.get("version") != VERSION:
-        raise DriveFileError(source, f"expected version {VERSION}, got {obj.get('version')!r}",
-                             "version")
+    # ``format_version`` (older files: ``version``)
+    key = "format_version" if "format_version" in obj else "version"
+    version = obj.get(key)
+    if isinstance(version, bool) or version != VERSION:
+        raise DriveFileError(source, f"expected {key} {VERSION}, got {version!r}", key)
     model = obj.get("model")
     if model not in MODELS:
         raise DriveFileError(source, f"expected one of {', '.join(MODELS)}, got {model!r}",

@@ -85,6 +85,17 @@ class AbuBall(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._init_values()
+        # Registration order sets the value references: keep it (and append new variables
+        # at the end) so that saved SSP files and masters keep working.
+        self._register_parameters()
+        self._register_inputs()
+        self._register_outputs()
+        self._register_switch_outputs()
+        self._register_later_variables()
+
+    def _init_values(self) -> None:
+        """Start values of parameters [SI] and inputs, and the internal state."""
         ball = BallParams()
         self.m, self.d, self.l, self.mu = ball.m, ball.d, ball.l, ball.mu
         self.mu_d = -1.0
@@ -108,6 +119,8 @@ class AbuBall(Fmi2Slave):
         self._plant: AbuPlant | None = None
         self._cache: tuple[float, PlantOutputs] | None = None
 
+    def _register_parameters(self) -> None:
+        """Ball, rotor and initial-state parameters (fixed)."""
         fixed = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
         self.register_variable(Real("m", description="ball mass, > 0 [kg]", **fixed))
         self.register_variable(Real("d", description="ball diameter, > 0 and < 2 l [m]", **fixed))
@@ -132,6 +145,9 @@ class AbuBall(Fmi2Slave):
         self.register_variable(Real(
             "beta_dot0", description="initial ball speed relative to the ABU [rad/s]; "
                                      "0 starts in stick, else in slip", **fixed))
+
+    def _register_inputs(self) -> None:
+        """The commanded torque [N m] and its rate [N m/s] (the older inputs)."""
         inp = dict(causality=Fmi2Causality.input)
         self.register_variable(Real(
             "torque", description="commanded torque at the step start [N m]",
@@ -139,6 +155,9 @@ class AbuBall(Fmi2Slave):
         self.register_variable(Real(
             "torque_rate", description="rate of the commanded torque inside "
                                        "a step (first-order hold) [N m/s]", **inp))
+
+    def _register_outputs(self) -> None:
+        """Continuous outputs: state, accelerations, forces, mu_req, applied torque, jerk."""
         out = dict(causality=Fmi2Causality.output)
         state = self._state_value
         self.register_variable(Real(
@@ -172,6 +191,10 @@ class AbuBall(Fmi2Slave):
             "jerk", description="d(alpha)/dt for the current torque inputs [rad/s3] (for a "
                                 "second-order hold of the controller's torque)",
             getter=lambda: self._alpha_derivative(1), **out))
+
+    def _register_switch_outputs(self) -> None:
+        """Discrete mode and the stick/slip switch bookkeeping."""
+        out = dict(causality=Fmi2Causality.output)
         discrete = dict(causality=Fmi2Causality.output, variability=Fmi2Variability.discrete)
         self.register_variable(Integer(
             "mode", description="-1 slip with beta_dot < 0, 0 stick, "
@@ -189,6 +212,12 @@ class AbuBall(Fmi2Slave):
                                          "last do_step", **discrete))
         self.register_variable(Real("t_first_step_switch", description="time of the first switch "
                                     "inside the last do_step, -1e30 if none [s]", **out))
+
+    def _register_later_variables(self) -> None:
+        """Variables added after the first versions: higher torque derivatives (inputs),
+        snap, crackle and mu_req_peak (outputs)."""
+        inp = dict(causality=Fmi2Causality.input)
+        out = dict(causality=Fmi2Causality.output)
         # Registered last: the value references above stay those of earlier versions.
         self.register_variable(Real("torque_accel", description="second derivative of the "
                                     "commanded torque inside a step (second-order hold, "

@@ -36,7 +36,7 @@ HERE = Path(__file__).resolve().parent
 
 #: Top-level packages of this project: a vendored file may import them only when they are
 #: vendored into the same FMU (the import is then rewritten to the vendored name).
-PROJECT_PACKAGES = ("abu_model", "controller", "fmus", "harness", "measurement")
+PROJECT_PACKAGES = ("abu", "abu_model", "controller", "fmus", "harness", "measurement", "twin")
 
 #: FMI options written into every FMU's <CoSimulation> element.
 FMU_OPTIONS = {

@@ -112,7 +112,7 @@ def read_fmu_interface(fmu: str | os.PathLike) -> FmuInterface:
 
 # ---------------------------------------------------------------------------- the system
 class ComponentLike(Protocol):
-    """An FMU instance: :class:`harness.system.Component` has this shape."""
+    """An FMU instance: :class:`harness.cosim.system.Component` has this shape."""
 
     name: str
     fmu: Path
@@ -120,7 +120,7 @@ class ComponentLike(Protocol):
 
 
 class ConnectionLike(Protocol):
-    """``src`` ("comp.output") -> ``dst`` ("comp.input"): :class:`harness.system.Connection`."""
+    """``src`` ("comp.output") -> ``dst`` ("comp.input"): :class:`harness.cosim.system.Connection`."""
 
     src: str
     dst: str

@@ -1,8 +1,9 @@
-"""Measurement: high-speed camera recordings to marker tracks, angles, omega, omega_dot and mu bounds.
+"""Measurement: high-speed camera recordings -> marker tracks -> theta, beta, omega, omega_dot ->
+a confidence interval on mu. Independent of the co-simulation (``harness``).
 
-Imaging half: ``frames_io`` (read/write recordings), ``markers`` (find the three markers in the first
-frame), ``tracking`` (sub-pixel marker tracking), ``render`` (synthetic camera) and ``twin``
-(a rendered digital twin of the report's experiment). The analysis half turns tracks into
-kinematics, intervals on mu and an error analysis. Import submodules explicitly; this package
-file stays light on purpose (no OpenCV import at package import time).
+Stages (subpackages, in data-flow order): ``imaging`` (frames -> marker tracks),
+``kinematics`` (tracks -> angles and their derivatives), ``inference`` (-> the interval),
+``report`` (text, JSON, figures). ``pipeline`` strings them together with typed results
+(``measure_recording(path) -> MeasureResult``). Import submodules explicitly; this package file
+stays light on purpose (no OpenCV or SciPy at import time).
 """

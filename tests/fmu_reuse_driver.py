@@ -7,7 +7,7 @@ usage: fmu_reuse_driver.py FMU_DIR ROUNDS -> one JSON line
    parameter -> fmi2ExitInitializationMode is fmi2Error (twice) with a message naming it, the
    good value set in initialization mode -> it initialises after all (recoverable), fmi2Reset,
    a good run again: its outputs equal the first run's.
-2. The master's pool (harness.reuse): a pooled co-simulation, then another one loaded, run
+2. The master's pool (harness.cosim.reuse): a pooled co-simulation, then another one loaded, run
    and freed (its logger callback freed, the memory churned), then a bad parameter on the
    pooled instances: a CoSimulationError naming it, and the next good run equals the first.
    (The segfault in fmi2ExitInitializationMode: fmpy's logger proxy kept only the last
@@ -100,9 +100,9 @@ def fmus_directly(fmu_dir: Path, rounds: int) -> dict:
 
 def pooled_master(fmu_dir: Path) -> str:
     from abu_model.params import BallParams, PlantParams
-    from harness import reuse
-    from harness.experiments import StaircaseExperiment
-    from harness.master import CoSimulationError
+    from harness.cosim import reuse
+    from harness.experiments.staircase import StaircaseExperiment
+    from harness.cosim.master import CoSimulationError
 
     hz = 2.0 * math.pi
     paths = {n: fmu_dir / f"{n}.fmu" for n in BAD}

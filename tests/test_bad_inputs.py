@@ -2,7 +2,7 @@
 
 Each case asserts: exit status 2, exactly one line on stderr that names the option (as typed)
 or the file, no output file or folder left behind (nor a temporary or lock file), within 10 s.
-Most cases run in-process through ``harness.cli.main`` (fast); a few run the real ``abu``
+Most cases run in-process through ``abu.cli.main.main`` (fast); a few run the real ``abu``
 entry point in a subprocess to prove the exit status.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.cli import main
+from abu.cli.main import main
 
 from synthetic_tracks import measured_pixels, simulate
 
@@ -47,7 +47,7 @@ def _write_tracks(path: Path, time_s, x, y, *, time_scale: float = 1.0, swap: bo
 def files(tmp_path_factory) -> dict[str, Path]:
     """Bad (and a few good) input files, made once."""
     import cv2
-    from measurement.frames_io import write_multipage_tiff
+    from measurement.imaging.frames_io import write_multipage_tiff
 
     d = tmp_path_factory.mktemp("bad_inputs_files")
     rec = simulate(0.02, "steps", n=1500)
@@ -358,7 +358,7 @@ def test_bad_input(argv, needle, files, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------------ real processes
-ABU = [sys.executable, "-m", "harness.cli"]
+ABU = [sys.executable, "-m", "abu.cli.main"]
 
 
 @pytest.mark.parametrize("argv,needle", [
@@ -383,7 +383,7 @@ def test_bad_input_in_a_real_process(argv, needle, files, tmp_path):
 
 def test_unexpected_error_is_one_line_exit_1_and_debug_shows_the_traceback(tmp_path,
                                                                              monkeypatch, capsys):
-    import measurement.multi as multi
+    import measurement.report.multi as multi
 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("simulated bug")
@@ -402,7 +402,7 @@ def test_unexpected_error_is_one_line_exit_1_and_debug_shows_the_traceback(tmp_p
 
 
 def test_negative_values_in_both_spellings_reach_the_option(capsys):
-    from harness.cli import build_parser
+    from abu.cli.main import build_parser
 
     parser = build_parser()
     for argv in (["simulate", "--omega0-hz", "-1e6"], ["simulate", "--omega0-hz=-1e6"]):

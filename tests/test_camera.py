@@ -1,6 +1,6 @@
 """Camera calibration: the twin's chessboard views, OpenCV's calibration, undistorted tracks.
 
-Truths used: the twin's lens model (measurement.optics.distort) and its drawn optics (k1, k2,
+Truths used: the twin's lens model (twin.optics.distort) and its drawn optics (k1, k2,
 optical centre), the true corner and marker positions it renders, OpenCV's own radial model
 (cv2.undistortPoints with f = the half diagonal), and the true mu of rendered recordings.
 """
@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from measurement import camera as cam_mod
-from measurement import camera_calibration as calib
-from measurement.calibration_target import render_views, undistort_map
-from measurement.cli import main
-from measurement.optics import OpticsSpec, distort, half_diagonal
-from measurement.scenario import random_scenario
+from measurement.imaging import camera as cam_mod
+from measurement.imaging import camera_calibration as calib
+from twin.calibration_target import render_views, undistort_map
+from abu.cli.main import main
+from twin.optics import OpticsSpec, distort, half_diagonal
+from twin.scenario import random_scenario
 
 CAL_SEEDS = range(200, 208)
 VIEWS = 16

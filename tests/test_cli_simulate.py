@@ -10,10 +10,10 @@ import pytest
 
 from abu_model.params import BallParams, PlantParams
 from abu_model.reference import simulate_staircase_reference
-from harness.cli import build_parser, main
-from harness.experiments import UNITS, StaircaseExperiment, friction_bounds
-from harness.results_io import read_table_csv
-from harness.table41 import REPORT_TABLE, report_implied_jump
+from abu.cli.main import build_parser, main
+from harness.experiments.staircase import UNITS, StaircaseExperiment, friction_bounds
+from harness.experiments.results_io import read_table_csv
+from harness.experiments.table41 import REPORT_TABLE, report_implied_jump
 
 HZ = 2 * math.pi
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -73,7 +73,7 @@ def test_stdout_closed_by_its_reader_is_a_quiet_exit_141(fmu_folder, tmp_path):
     out = tmp_path / "run"
     try:
         proc = subprocess.run(
-            [sys.executable, "-m", "harness.cli", "simulate", "--motion", "ramp", "--jerk", "5000",
+            [sys.executable, "-m", "abu.cli.main", "simulate", "--motion", "ramp", "--jerk", "5000",
              "--omega0-hz", "-20", "--t-end", "0.06", "--mu", "0.01", "--fmu-dir", fmu_folder,
              "--out", str(out), "--json"],
             stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120)
@@ -106,10 +106,10 @@ def test_user_errors_name_the_option_and_exit_2(argv, option, capsys):
 def test_entry_point_error_has_no_traceback(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", "simulate", "--te", "-1"],
+    proc = subprocess.run([sys.executable, "-m", "abu.cli.main", "simulate", "--te", "-1"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "'--te'" in proc.stderr and "Traceback" not in proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", "build-fmus", "--out",
+    proc = subprocess.run([sys.executable, "-m", "abu.cli.main", "build-fmus", "--out",
                            str(blocker / "sub")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and str(blocker) in proc.stderr
 
@@ -122,7 +122,9 @@ def _closed_form_hz(mu: float, jump: float) -> int:
 def test_table41_integral_is_the_closed_form_and_checked(fmu_folder, capsys):
     mus = [2.75e-3, 1.1e-2]
     assert main(["table41", "--mu", *map(str, mus), "--fmu-dir", fmu_folder, "--json"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    table = json.loads(capsys.readouterr().out)
+    assert table["kind"] == "abu-table41" and table["units"]["omega0_hz"] == "Hz"
+    rows = table["rows"]
     assert [r["mu"] for r in rows] == mus
     assert [r["omega0_hz"] for r in rows] == [_closed_form_hz(mu, 2 * 0.5 * 2.2 * HZ) for mu in mus]
     assert [r["omega0_hz"] for r in rows] == [11, 6]
@@ -142,12 +144,14 @@ def test_report_table_is_reproduced_by_a_late_step_in_thesis_mode(fmu_folder, ca
     mus = sorted(REPORT_TABLE)
     assert main(["table41", "--mu", *map(str, mus), "--theta-ref", "thesis", "--t-step",
                  str(t_step), "--no-check", "--json"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    table = json.loads(capsys.readouterr().out)
+    assert table["kind"] == "abu-table41" and table["units"]["omega0_hz"] == "Hz"
+    rows = table["rows"]
     assert [r["omega0_hz"] for r in rows] == [REPORT_TABLE[mu] for mu in mus]  # 17 12 10 9 8 7
     # One row checked by co-simulation.
     assert main(["table41", "--mu", str(mus[0]), "--theta-ref", "thesis", "--t-step",
                  str(t_step), "--fmu-dir", fmu_folder, "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)[0]["consistent"] is True
+    assert json.loads(capsys.readouterr().out)["rows"][0]["consistent"] is True
 
 
 def test_demo_builds_and_reproduces_the_report(tmp_path, capsys):

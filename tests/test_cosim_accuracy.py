@@ -24,8 +24,8 @@ from hypothesis import strategies as st
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams, PlantParams
 from abu_model.reference import simulate_staircase_reference
-from harness.cli import main
-from harness.experiments import StaircaseExperiment, run_staircase
+from abu.cli.main import main
+from harness.experiments.staircase import StaircaseExperiment, run_staircase
 
 HZ = 2.0 * math.pi
 REPORT = dict(omega0=-17 * HZ, omega_end=-22 * HZ, t0=0.0, te=1.0)

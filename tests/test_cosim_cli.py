@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from harness.cli import main
-from harness.stepping import DEFAULT_TOL
+from abu.cli.main import main
+from harness.cosim.stepping import DEFAULT_TOL
 
 
 def test_tol_and_comm_step_select_the_stepping(fmu_dir, capsys):

@@ -6,8 +6,8 @@ import math
 from collections import Counter
 
 from abu_model.params import PlantParams
-from harness.experiments import StaircaseExperiment
-from harness.master import CoSimulation
+from harness.experiments.staircase import StaircaseExperiment
+from harness.cosim.master import CoSimulation
 
 HZ = 2.0 * math.pi
 
@@ -25,7 +25,7 @@ def test_no_value_is_read_twice_per_point_and_an_ordinary_step_costs_32_calls(fm
 
         def logged_step(t, h):
             segments.append([])
-            calls_at_step.append(sim._calls)
+            calls_at_step.append(sim.fmi_calls)
             return do_step(t, h)
 
         sim._get, sim.do_step = logged_get, logged_step

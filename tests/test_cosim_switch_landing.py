@@ -8,11 +8,11 @@ from dataclasses import replace
 
 import pytest
 
-import harness.runner
+import harness.cosim.runner
 from abu_model.params import BallParams, PlantParams
 from abu_model.reference import simulate_staircase_reference
-from harness.experiments import StaircaseExperiment, run_staircase
-from harness.stepping import inner_switches
+from harness.experiments.staircase import StaircaseExperiment, run_staircase
+from harness.cosim.stepping import inner_switches
 
 HZ = 2.0 * math.pi
 TOL = 1e-9
@@ -72,7 +72,7 @@ def test_a_continuous_slip_onset_inside_a_step_does_not_overclaim(fmu_dir, monke
     coarse = replace(exp, tol=1e-5, hold_order=2)
     tight = run_staircase(coarse, fmu_dir).summary
     assert tight["mu_low"] == pytest.approx(mu, rel=1e-8) and tight["mu_low"] <= mu * (1 + 1e-9)
-    monkeypatch.setattr(harness.runner, "SWITCH_TIGHTEN", 1.0)  # without the tight approach
+    monkeypatch.setattr(harness.cosim.runner, "SWITCH_TIGHTEN", 1.0)  # without the tight approach
     loose = run_staircase(coarse, fmu_dir).summary
     assert loose["mu_low"] > mu * (1 + 1e-7)
     assert tight["cosim"]["steps"] <= loose["cosim"]["steps"] + 20  # measured: 39 against 36

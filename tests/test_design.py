@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from controller.drive import Drive
-from harness.cli import main
-from harness.design import REPORT_INTERVALS, DesignSpec, check_design, design_staircase, predict
+from abu.cli.main import main
+from harness.planning.design import REPORT_INTERVALS, DesignSpec, check_design, design_staircase, predict
 
 REPORT_MU = 2.75e-3
 CASES = [
@@ -89,7 +89,7 @@ def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
     and co-simulating two opposite corners at the range's ends confirms it."""
     from dataclasses import replace
 
-    from harness.design import drive_corners, holds
+    from harness.planning.design import drive_corners, holds
 
     ci = {"zeta": (0.6, 0.8), "omega_n_rad_s": (10.0, 14.0), "tau_motor_s": (0.017, 0.023)}
     drive = Drive("pi-lag", 0.7, 12.0, 0.02, ci95=ci)

@@ -24,7 +24,7 @@ from multiprocessing import get_context
 import numpy as np
 import pytest
 
-twin = pytest.importorskip("measurement.twin")
+twin = pytest.importorskip("twin.report_twin")
 
 N_FRAMES = 1800
 N_RECORDINGS = 50
@@ -58,8 +58,8 @@ def noisy_frames(clean: np.ndarray, positions, noise_sigma: float, seed: int) ->
 
 def _one_recording(seed: int) -> dict:
     """Noise seed ``seed`` on the clean frames, tracking from the true frame-0 seeds, analysis."""
-    from measurement.analysis import AnalysisOptions, analyse_tracks
-    from measurement.tracking import track_recording
+    from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+    from measurement.imaging.tracking import track_recording
 
     c, cd, ball = _WORK["positions"]
     frames = noisy_frames(_WORK["clean"], (c, cd, ball), _WORK["noise"], seed)
@@ -80,7 +80,7 @@ def simulated(fmu_dir):
 
 
 def test_noise_boxes_reproduce_the_renderers_noise(simulated):
-    from measurement.render import render_frames
+    from twin.render import render_frames
     settings, _, positions, _ = simulated
     c, cd, ball = (p[:3] for p in positions)
     clean = render_frames(c, cd, ball, settings.render.with_(noise_sigma=0.0), seed=0)
@@ -98,7 +98,7 @@ def test_noise_boxes_reproduce_the_renderers_noise(simulated):
 
 def test_intervals_from_rendered_recordings_contain_the_true_mu(simulated, record_property,
                                                                 tmp_path):
-    from measurement.render import render_frames
+    from twin.render import render_frames
     settings, state, positions, result = simulated
     mu = settings.mu
     t_slip = result.summary["t_slip"]
@@ -147,8 +147,8 @@ def truth_tracks_csv(folder, path):
     """A tracks CSV from the twin's truth.csv (the true marker centres)."""
     lines = (folder / "truth.csv").read_text().splitlines()
     head = lines[0].split(",")
-    cols = ["time_s", "centre_x_px", "centre_y_px", "cd_x_px", "cd_y_px", "ball_x_px",
-            "ball_y_px"]
+    cols = ["time_s", "x_center_px", "y_center_px", "x_cd_px", "y_cd_px", "x_ball_px",
+            "y_ball_px"]
     idx = [head.index(c) for c in cols]
     rows = ["time,x_center,y_center,x_cd,y_cd,x_ball,y_ball"]
     for line in lines[1:]:
@@ -159,7 +159,7 @@ def truth_tracks_csv(folder, path):
 
 
 def test_render_then_measure_with_the_command_line(tmp_path, capsys):
-    from measurement.cli import main
+    from abu.cli.main import main
 
     rec = tmp_path / "twin"
     assert main(["render", "--out", str(rec), "--frames", str(N_FRAMES), "--seed", "7",

@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams, PlantParams
 from abu_model.reference import simulate_staircase_reference
-from harness.experiments import (RampExperiment, StaircaseExperiment, run_ramp, run_staircase,
+from harness.experiments.staircase import (RampExperiment, StaircaseExperiment, run_ramp, run_staircase,
                                  with_plant)
 
 HZ = 2.0 * math.pi

@@ -7,7 +7,7 @@ import pytest
 import tifffile
 
 from abu_model.errors import AbuError
-from measurement.frames_io import (Recording, RecordingError, read_recording, write_frame_folder,
+from measurement.imaging.frames_io import (Recording, RecordingError, read_recording, write_frame_folder,
                                    write_multipage_tiff, write_npy)
 
 
@@ -214,7 +214,7 @@ def test_failed_write_leaves_nothing(tmp_path):
 def test_conversion_in_blocks_equals_the_whole_array_conversion():
     """sample_formats converts long recordings block by block (no full-size temporaries):
     the result over several blocks is the whole-array shift / luma, exactly."""
-    from measurement import sample_formats as fmt
+    from measurement.imaging import sample_formats as fmt
 
     rng = np.random.default_rng(0)
     n = 2 * fmt.BLOCK_FRAMES + 3

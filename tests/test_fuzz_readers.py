@@ -38,7 +38,7 @@ class _Files(dict):
 @pytest.fixture(scope="module")
 def originals(tmp_path_factory) -> dict[str, bytes]:
     import cv2
-    from measurement.frames_io import write_multipage_tiff, write_npy
+    from measurement.imaging.frames_io import write_multipage_tiff, write_npy
 
     d = tmp_path_factory.mktemp("fuzz_originals")
     stack = STACK
@@ -49,7 +49,7 @@ def originals(tmp_path_factory) -> dict[str, bytes]:
 
 
 def _read(path: Path):
-    from measurement.frames_io import read_recording
+    from measurement.imaging.frames_io import read_recording
     rec = read_recording(path, mmap=False)
     return np.asarray(rec.frames)
 
@@ -130,7 +130,7 @@ def mutated_text(draw, text: str) -> str:
 @settings(max_examples=300, **SETTINGS)
 @given(text=mutated_text(TRACKS))
 def test_tracks_reader_on_mutated_files(tmp_path, text):
-    from measurement.tracks_io import read_tracks_csv
+    from measurement.imaging.tracks_io import read_tracks_csv
 
     path = tmp_path / "tracks.csv"
     path.write_text(text, encoding="utf-8")
@@ -144,7 +144,7 @@ def test_tracks_reader_on_mutated_files(tmp_path, text):
 
 
 def test_tracks_reader_refuses_a_row_cut_in_the_middle(tmp_path):
-    from measurement.tracks_io import read_tracks_csv
+    from measurement.imaging.tracks_io import read_tracks_csv
 
     path = tmp_path / "tracks.csv"
     for cut in range(len(TRACKS) - 60, len(TRACKS) - 2, 7):  # inside the last row
@@ -161,7 +161,7 @@ SUMMARY = json.dumps({"kind": "abu-measure-summary", "format_version": 1, "mu_lo
 @settings(max_examples=300, **SETTINGS)
 @given(text=mutated_text(SUMMARY))
 def test_summary_reader_on_mutated_files(tmp_path, text):
-    from measurement.multi import read_intervals
+    from measurement.report.multi import read_intervals
 
     path = tmp_path / "summary.json"
     path.write_text(text, encoding="utf-8")
@@ -179,7 +179,7 @@ def test_summary_reader_on_mutated_files(tmp_path, text):
 @settings(max_examples=25, **SETTINGS)
 @given(text=mutated_text(SUMMARY))
 def test_measure_summary_command_on_mutated_files(tmp_path_factory, text, capsys):
-    from harness.cli import main
+    from abu.cli.main import main
 
     d = tmp_path_factory.mktemp("fuzz_summary")
     path = d / "summary.json"

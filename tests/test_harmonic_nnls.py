@@ -1,9 +1,9 @@
-"""The NumPy NNLS of measurement.harmonic against SciPy's (an independent implementation)."""
+"""The NumPy NNLS of measurement.kinematics.harmonic against SciPy's (an independent implementation)."""
 import numpy as np
 import pytest
 from scipy.optimize import nnls as scipy_nnls
 
-from measurement.harmonic import nnls
+from measurement.kinematics.harmonic import nnls
 
 
 @pytest.mark.parametrize("seed", range(12))

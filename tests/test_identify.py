@@ -19,10 +19,10 @@ from abu_model.reference import simulate_staircase_reference
 from controller.drive import Drive, DriveFileError, drive_from_dict, dumps_drive, load_drive
 from controller.pi import PISpeedController
 from controller.reference import Staircase
-from harness.cli import main
-from harness.identify import fit_drive
-from harness.loop_response import Setpoints, as_setpoints, loop_tf, response
-from harness.record_io import Record
+from abu.cli.main import main
+from harness.planning.identify import fit_drive
+from harness.planning.loop_response import Setpoints, as_setpoints, loop_tf, response
+from harness.planning.record_io import Record
 
 HZ = 2.0 * math.pi
 #: (zeta, omega_n [rad/s], tau_motor [s]) and model: the report's loop, the twin's drive, two more.
@@ -133,7 +133,7 @@ def test_omega_record_from_a_speed_sensor(tmp_path):
     t = np.arange(1000) / 1000.0
     omega = response(sp, t, 0.45, 6.0, 0.008, need_theta=False).omega + rng.normal(0, 0.05, t.size)
     _write_csv(tmp_path / "omega.csv", ["time_s", "omega_rad_s"], [t, omega])
-    from harness.record_io import read_record
+    from harness.planning.record_io import read_record
     res = fit_drive(read_record(tmp_path / "omega.csv"), sp, "pi-lag")
     for name, truth in (("zeta", 0.45), ("omega_n_rad_s", 6.0), ("tau_motor_s", 0.008)):
         lo, hi = res.drive.ci95[name]
@@ -160,7 +160,7 @@ def test_drive_json_round_trip_and_validation(tmp_path):
     assert (back.model, back.zeta, back.omega_n, back.tau_motor) == ("pi-lag", 0.7, 12.0, 0.02)
     assert back.ci95["zeta"] == (0.69, 0.71)
     good = d.to_dict()
-    for change, field in [({"kind": "x"}, "kind"), ({"version": 2}, "version"),
+    for change, field in [({"kind": "x"}, "kind"), ({"format_version": 2}, "format_version"), ({"format_version": None, "version": 1}, "format_version"),
                           ({"model": "pid"}, "model"), ({"zeta": -1.0}, "zeta"),
                           ({"omega_n_rad_s": "fast"}, "omega_n_rad_s"),
                           ({"tau_motor_s": float("nan")}, "tau_motor_s"),
@@ -169,6 +169,9 @@ def test_drive_json_round_trip_and_validation(tmp_path):
             drive_from_dict({**good, **change}, "x.json")
     with pytest.raises(DriveFileError, match="omega_n_rad_s"):
         drive_from_dict({k: v for k, v in good.items() if k != "omega_n_rad_s"}, "x.json")
+    # files written before 'format_version' (they said 'version') are still read
+    old = {k: v for k, v in good.items() if k != "format_version"}
+    assert drive_from_dict({**old, "version": 1}, "old.json").zeta == 0.7
     (tmp_path / "bad.json").write_text("{not json")
     with pytest.raises(DriveFileError, match="bad.json"):
         load_drive(tmp_path / "bad.json")

@@ -1,9 +1,9 @@
-"""The model-based confidence set on mu (measurement.inference): coverage on many seeded
+"""The model-based confidence set on mu (measurement.inference.infer_mu): coverage on many seeded
 recordings of the harsh twin's family, null bounds with a status, the slip integration against
 the exact plant.
 
 Coverage here (a smaller version of ``benchmarks/bench_coverage.py``, which renders and tracks
-raw frames): the harsh twin's random drives (``measurement.scenario.random_scenario``: PI
+raw frames): the harsh twin's random drives (``twin.scenario.random_scenario``: PI
 staircases with setpoint weighting / filters, smooth acceleration profiles, torque lags 0-30 ms,
 mu in [0.005, 0.06], mu_d / mu in [0.6, 1]) are simulated on the exact plant and its camera
 geometry (lens distortion, eccentric centre marker); the marker tracks get white tracking
@@ -22,8 +22,8 @@ import pytest
 
 from abu_model.params import BallParams, PlantParams
 from abu_model.plant import AbuPlant
-from measurement.analysis import analyse_tracks
-from measurement.slip_model import signed_mu_req, slip_displacement
+from measurement.inference.analysis import analyse_tracks
+from measurement.inference.slip_model import signed_mu_req, slip_displacement
 
 from synthetic_tracks import measured_pixels, simulate
 
@@ -34,7 +34,7 @@ TWO_PI = 2.0 * math.pi
 def scenario_tracks(seed: int, n_frames: int = 2400, light_scale: float = 1.0):
     """(times, x, y, ball, truth) of one drawn scenario at the tracks level (``light_scale``
     multiplies the lighting shift of the ball's apparent centre)."""
-    from measurement.scenario import random_scenario, simulate_scenario
+    from twin.scenario import random_scenario, simulate_scenario
     scn = random_scenario(seed, n_frames=n_frames)
     state, pos = simulate_scenario(scn)
     rng = np.random.default_rng([seed, 7])
@@ -70,7 +70,7 @@ def test_coverage_of_the_stated_interval_on_the_harsh_family():
     widths = [r["width"] for r in rows if r["width"] is not None]
     big = [r for r in rows if r["miss"] > 0.02]
     print(f"\nharsh-twin drives at the tracks level, {N_COVERAGE} recordings "
-          f"(measurement.scenario seeds 0..{N_COVERAGE - 1}, 2400 frames): coverage of the "
+          f"(twin.scenario seeds 0..{N_COVERAGE - 1}, 2400 frames): coverage of the "
           f"stated 95 % interval {coverage:.0%}, missing mu by > 2 %: {len(big)}, median "
           f"relative width {np.median(widths):.1%}, 90th percentile "
           f"{np.percentile(widths, 90):.1%}, bounds null in "
@@ -148,7 +148,7 @@ def test_slip_integration_matches_the_exact_plant(mu_d_ratio):
 # Slow continuous onsets (issue 7): staircases through a long torque lag (>= 12 ms), mu_d / mu
 # >= 0.9 (beta leaves rest as dt^3), the stick stretch of the trusted region covering less than
 # one turn, so the slip enters ball angles whose lighting harmonic the stick never showed
-# (seeds of measurement.scenario picked by those criteria from 0..299). Before the in-window
+# (seeds of twin.scenario picked by those criteria from 0..299). Before the in-window
 # harmonic refit (InferenceOptions.harmonic_orders = () then) seed 141 put its lower bound
 # 4.8 % above mu; rendered, seeds 58 and 141 of bench_coverage missed by 6.2 % and 2.5 %.
 SLOW_ONSET_SEEDS = (5, 8, 58, 118, 141, 191, 198, 286)
@@ -168,14 +168,14 @@ def test_slow_onsets_lower_bound_stays_below_mu():
 
 
 def test_rice_quantile_of_the_savgol_error_maximum_against_monte_carlo():
-    """The lower bound's noise quantile (measurement.sup_noise, Rice's formula) against the
+    """The lower bound's noise quantile (measurement.inference.sup_noise, Rice's formula) against the
     simulated maximum of white noise through the default omega_dot kernel (Savitzky-Golay
     42 ms, degree 9, 4500 frames/s): exceeded at most at the stated rate (one-sided 2.5 %), and
     not grossly more conservative (above 1 %)."""
     from scipy.signal import fftconvolve
 
-    from measurement import sup_noise
-    from measurement.kinematics import _odd_window, stable_savgol_coeffs
+    from measurement.inference import sup_noise
+    from measurement.kinematics.estimators import _odd_window, stable_savgol_coeffs
 
     dt = 1.0 / 4500.0
     c2 = stable_savgol_coeffs(_odd_window(0.042, dt, 11), 9, 2, dt)
@@ -200,7 +200,7 @@ def test_rice_quantile_bisection_equals_a_library_root_finder():
 
     from scipy.optimize import brentq
 
-    from measurement import sup_noise
+    from measurement.inference import sup_noise
     for alpha in (0.005, 0.025, 0.05):
         z0 = NormalDist().inv_cdf(1.0 - alpha)
         for duration in (1e-3, 0.01, 0.1, 1.0):
@@ -256,7 +256,7 @@ def test_scale_nuisance_bounds_against_closed_forms():
     about m0 gets (to first order in h/m0, s_e) the quadrature sum z sqrt(h^2 + (s_e m0)^2);
     without the nuisance the bounds are the profile's own; a larger budget on one side (the
     sup quantile of the lower bound) reaches further on that side only."""
-    from measurement.inference import scale_nuisance_bounds
+    from measurement.inference.infer_mu import scale_nuisance_bounds
 
     z = 1.959963984540054
     crit = z * z

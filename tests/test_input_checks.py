@@ -1,4 +1,4 @@
-"""measurement.input_checks on a broad family of records: valid ones pass, still or swapped refused.
+"""measurement.kinematics.input_checks on a broad family of records: valid ones pass, still or swapped refused.
 
 Family: the exact stick/slip plant (tests/synthetic_tracks.py) with mu in {0.01, 0.02, 0.05, 0.3}
 (0.3: the ball never slips), ramp and staircase-like drives, tracking noise 0.05 px, lighting
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from abu_model.errors import AbuError, ParameterError
-from measurement.input_checks import check_motion_and_roles, check_sampling
+from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
 from synthetic_tracks import measured_pixels, simulate
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from abu_model.errors import ParameterError
-from measurement.analysis import AnalysisOptions, analyse_tracks
-from measurement.interval import (IntervalOptions, mu_required, predicted_creep, running_max)
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+from measurement.inference.running_max import (IntervalOptions, mu_required, predicted_creep, running_max)
 from synthetic_tracks import measured_pixels, simulate
 
 M, D, L = 1.4e-4, 3.0e-3, 1.15e-2

@@ -36,7 +36,7 @@ def _env(tmp_base: Path) -> dict[str, str]:
 
 
 def _abu(args: list[str], env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "harness.cli", *args], cwd=ROOT, env=env,
+    return subprocess.Popen([sys.executable, "-m", "abu.cli.main", *args], cwd=ROOT, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
@@ -81,7 +81,7 @@ def _run_dirs(tmp_base: Path) -> list[str]:
 def twin(fmu_dir, tmp_path_factory) -> Path:
     base = tmp_path_factory.mktemp("kill_twin")
     out = base / "twin"
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", "render", "--out", str(out),
+    proc = subprocess.run([sys.executable, "-m", "abu.cli.main", "render", "--out", str(out),
                            "--frames", "1500", "--quiet", "--fmu-dir", _fmu_folder(fmu_dir)], cwd=ROOT, env=_env(base),
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -191,7 +191,7 @@ def test_two_runs_into_one_out(fmu_dir, tmp_path):
 
 def test_swapped_seed_roles_are_refused(twin, tmp_path, capsys):
     """The recording measured with the CD and ball seeds swapped: an error, not a number."""
-    from harness.cli import main
+    from abu.cli.main import main
 
     meta = json.loads((twin / "meta.json").read_text())
     centre, cd, ball = meta["seeds"].split(";")

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from abu_model.errors import ParameterError
-from measurement.harmonic import monotone_basis, remove_harmonic
-from measurement.kinematics import (noise_sigma, report_kinematics, sample_interval,
+from measurement.kinematics.harmonic import monotone_basis, remove_harmonic
+from measurement.kinematics.estimators import (noise_sigma, report_kinematics, sample_interval,
                                     savgol_kinematics)
-from measurement.tracks_io import angles_from_pixels
+from measurement.imaging.tracks_io import angles_from_pixels
 
 FPS = 4500.0
 N = 3072
@@ -43,7 +43,7 @@ def test_clockwise_image_rotation_gives_negative_theta_rate():
 
 
 def test_angles_unwrap_over_many_turns_and_match_render_geometry():
-    render = pytest.importorskip("measurement.render")
+    render = pytest.importorskip("twin.render")
     geo = render.CameraGeometry()
     theta_true = -2 * math.pi * 15 * T          # ~10 turns clockwise
     beta_true = 2.9 + 0.5 * T                   # crosses pi: beta must not jump by 2 pi
@@ -167,7 +167,7 @@ def test_default_estimator_bias_below_its_noise_bar_on_a_narrow_acceleration_bum
     (36 ms, degree 7) was off by twice its bar, a 20 ms cubic by 28 times."""
     from math import erf
 
-    from measurement.analysis import AnalysisOptions
+    from measurement.inference.analysis import AnalysisOptions
 
     opt = AnalysisOptions()
     w0, amp, t0, s = -60.0, -300.0, 0.3, 0.007

@@ -23,9 +23,9 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from harness.master import (AlgebraicLoopError, CoSimulation, CoSimulationError, FMUError,
+from harness.cosim.master import (AlgebraicLoopError, CoSimulation, CoSimulationError, FMUError,
                             simulate)
-from harness.system import Component, Connection, Source, System
+from harness.cosim.system import Component, Connection, Source, System
 
 COMMON = """
 import math

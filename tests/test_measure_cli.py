@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from measurement import tracks_io
-from measurement.cli import main
-from measurement.tracks_io import (LostMarkerError, TracksFileError, fill_lost, read_tracks_csv,
+from measurement.imaging import tracks_io
+from abu.cli.main import main
+from measurement.imaging.tracks_io import (LostMarkerError, TracksFileError, fill_lost, read_tracks_csv,
                                    write_tracks_csv)
 from synthetic_tracks import measured_pixels, simulate, to_pixels
 
@@ -183,7 +183,7 @@ def test_lost_marker_in_tracks_exits_2(tmp_path, capsys, record):
 # ------------------------------------------------------------------------------ frames input
 
 def rendered_stack(tmp_path, n=60, hide_ball=None):
-    render = pytest.importorskip("measurement.render")
+    render = pytest.importorskip("twin.render")
     geo = render.CameraGeometry()
     theta = -2 * math.pi * 9 * np.arange(n) / 4500
     beta = np.full(n, 0.6)
@@ -260,7 +260,7 @@ def test_measure_imports_no_heavy_library(tracks_csv, tmp_path):
     import subprocess
     import sys
     heavy = ("scipy", "matplotlib", "fmpy", "dask", "control", "pandas")
-    code = ("import json, sys; from harness.cli import main; "
+    code = ("import json, sys; from abu.cli.main import main; "
             f"rc = main(['measure', {str(tracks_csv)!r}, '--tracks', '--out', "
             f"{str(tmp_path / 'o')!r}, '--quiet', '--no-plots']); "
             f"print(json.dumps([rc] + sorted(m for m in {heavy!r} if m in sys.modules)))")

@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from measurement.cli import main
-from measurement.multi import (IntervalInputError, combine_summaries, coverage_count,
+from abu.cli.main import main
+from measurement.report.multi import (IntervalInputError, combine_summaries, coverage_count,
                                innermost_intervals, level_set, read_intervals, turnbull)
 
 # Twelve intervals built to match what the report states about its twelve runs (sec. 5.3):

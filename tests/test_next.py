@@ -6,8 +6,9 @@ import json
 
 import pytest
 
-from harness.cli import main
-from harness.next_run import IntervalsError, combine, read_interval
+from abu.cli.main import main
+from abu.intervals_io import read_interval
+from harness.planning.next_run import IntervalsError, combine
 
 MU = 2.75e-3  # the report's simulations (sec. 4.2.3)
 

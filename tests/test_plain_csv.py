@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from measurement.cli import main as measure_main
-from measurement.tracks_io import OUTPUT_COLUMNS, read_tracks_csv
+from abu.cli.main import main as measure_main
+from measurement.imaging.tracks_io import OUTPUT_COLUMNS, read_tracks_csv
 
 from synthetic_tracks import measured_pixels, simulate
 
@@ -86,7 +86,7 @@ def test_summary_keys_of_the_model_interval(measured):
 
 
 def test_result_csv_of_abu_simulate(tmp_path, fmu_dir):
-    from harness.cli import main
+    from abu.cli.main import main
     folder = str(next(iter(fmu_dir.values())).parent)
     out = tmp_path / "sim"
     assert main(["simulate", "--fmu-dir", folder, "--out", str(out), "--json"]) == 0
@@ -99,7 +99,7 @@ def test_result_csv_of_abu_simulate(tmp_path, fmu_dir):
 
 
 def test_truth_csv_of_the_twin(tmp_path):
-    from measurement.scenario import _truth_csv, random_scenario, simulate_scenario
+    from twin.scenario import _truth_csv, random_scenario, simulate_scenario
     scn = random_scenario(3, n_frames=1000)
     state, pos = simulate_scenario(scn)
     path = tmp_path / "truth.csv"

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from abu_model.errors import ParameterError
-from measurement.render import (CameraGeometry, MarkerStyle, RenderSettings, angles_from_pixels,
+from twin.render import (CameraGeometry, MarkerStyle, RenderSettings, angles_from_pixels,
                                 lighting_image, render_frames, render_markers)
-from measurement.tracking import track_recording
+from measurement.imaging.tracking import track_recording
 
 QUIET = dict(width=64, height=64, background=50.0, gradient=0.0, noise_sigma=0.0)
 
@@ -166,7 +166,7 @@ def test_bad_settings_and_inputs():
 def test_sample_at_frames_takes_rows_and_interpolates_between():
     """Rows on frame times are taken as they are (right limits at jumps); between rows the
     cubic Hermite interpolant reproduces a cubic theta(t) exactly."""
-    from measurement.twin import TwinError, sample_at_frames
+    from twin.report_twin import TwinError, sample_at_frames
 
     t = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4])
     side = np.array([0, 0, -1, 1, 0, 0])
@@ -196,7 +196,7 @@ def test_twin_drive_reproduces_the_reports_recordings(fmu_dir):
     t_slip in [0.10, 0.33] s, omega on the staircase, acceleration of the order the report's
     bounds imply; the identified loop (zeta 0.5, omega_n 2.2 rad/s) cannot do that."""
     from controller.reference import Staircase
-    from measurement.twin import DriveSettings, TwinSettings, simulate_twin
+    from twin.report_twin import DriveSettings, TwinSettings, simulate_twin
 
     s = TwinSettings()
     state, (centre, cd, ball), _ = simulate_twin(s, fmu_dir=fmu_dir)
@@ -229,9 +229,9 @@ def test_twin_drive_reproduces_the_reports_recordings(fmu_dir):
 def test_render_twin_writes_a_trackable_recording(fmu_dir, tmp_path):
     import json
 
-    from measurement.frames_io import read_recording
-    from measurement.markers import parse_seeds
-    from measurement.twin import TRUTH_COLUMNS, TwinSettings, render_twin
+    from measurement.imaging.frames_io import read_recording
+    from measurement.imaging.markers import parse_seeds
+    from twin.report_twin import TRUTH_COLUMNS, TwinSettings, render_twin
 
     s = TwinSettings(n_frames=300, record_start=0.19)  # around the slip at ~0.20 s
     out = render_twin(tmp_path / "twin", s, fmu_dir=fmu_dir)
@@ -251,8 +251,8 @@ def test_render_twin_writes_a_trackable_recording(fmu_dir, tmp_path):
     assert meta["render"]["exposure_fraction"] == 0.25
     tracks = track_recording(rec.frames, parse_seeds(meta["seeds"]))
     assert not tracks.lost.any()
-    for m, (cx, cy) in enumerate([("centre_x_px", "centre_y_px"), ("cd_x_px", "cd_y_px"),
-                                  ("ball_apparent_x_px", "ball_apparent_y_px")]):
+    for m, (cx, cy) in enumerate([("x_center_px", "y_center_px"), ("x_cd_px", "y_cd_px"),
+                                  ("x_ball_apparent_px", "y_ball_apparent_px")]):
         e = np.hypot(tracks.x[:, m] - truth[cx], tracks.y[:, m] - truth[cy])
         assert np.sqrt(np.mean(e ** 2)) < 0.02, m
     th, be = angles_from_pixels(tracks.xy(0), tracks.xy(1), tracks.xy(2))

@@ -15,10 +15,11 @@ import pytest
 
 from abu_model.errors import ParameterError
 from abu_model.params import BallParams
-from measurement.drives import DriveSpec, profile_accel, rotor_mu_req, simulate_drive
-from measurement.scenario import (TRUTH_COLUMNS, random_scenario, render_scenario_frames,
+from twin.drives import DriveSpec, profile_accel, rotor_mu_req, simulate_drive
+from twin.truth_csv import AXIS_COLUMNS, TRUTH_COLUMNS, read_truth_csv
+from twin.scenario import (random_scenario, render_scenario_frames,
                                   simulate_scenario)
-from measurement.tracking import track_recording
+from measurement.imaging.tracking import track_recording
 
 TIMES = np.arange(1500) / 4500.0
 
@@ -135,7 +136,7 @@ def test_rendered_recording_tracks_back_to_the_truth_and_the_ball_centre_has_har
 
 
 def test_cli_renders_a_random_scenario(tmp_path):
-    from measurement.cli import main
+    from abu.cli.main import main
 
     out = tmp_path / "r"
     assert main(["render", "--scenario", "random", "--seed", "5", "--size", "200",
@@ -148,7 +149,7 @@ def test_cli_renders_a_random_scenario(tmp_path):
     for key in ("drive", "lighting", "optics", "geometry", "simulation", "seeds"):
         assert key in meta
     truth = pd.read_csv(out / "truth.csv")
-    assert tuple(truth.columns) == TRUTH_COLUMNS and len(truth) == 1100
+    assert tuple(truth.columns) == TRUTH_COLUMNS + AXIS_COLUMNS and len(truth) == 1100
     first = int(np.flatnonzero(truth["mode"].to_numpy() != 0)[0])
     assert meta["simulation"]["first_slip_frame"] == first
     assert truth["time_s"][first - 1] <= meta["simulation"]["t_slip_s"] <= truth["time_s"][first]
@@ -161,7 +162,7 @@ def test_cli_renders_a_random_scenario(tmp_path):
 
 
 def test_lens_distortion_and_vignetting_closed_forms():
-    from measurement.optics import OpticsSpec, distort, half_diagonal, vignetting_map
+    from twin.optics import OpticsSpec, distort, half_diagonal, vignetting_map
 
     spec = OpticsSpec(k1=0.02, k2=-0.005, optical_centre=(99.5, 101.0), vignetting=0.3)
     rc = half_diagonal(200, 200)
@@ -181,7 +182,7 @@ def test_lens_distortion_and_vignetting_closed_forms():
 def test_sensor_noise_flicker_and_column_pattern_follow_their_laws():
     """Flat radiance S: temporal variance = read^2 + S / gain (shot noise); frame means follow
     the 100 Hz flicker; column means carry the fixed column offsets, the same in every frame."""
-    from measurement.optics import OpticsSpec, Sensor
+    from twin.optics import OpticsSpec, Sensor
 
     spec = OpticsSpec(psf_sigma=0.0, vignetting=0.0, conversion_gain=4.0, read_noise=2.0,
                       column_offset_sigma=3.0, column_gain_sigma=0.0)
@@ -204,7 +205,7 @@ def test_sensor_noise_flicker_and_column_pattern_follow_their_laws():
 
 
 def test_disk_sprite_area_and_centre():
-    from measurement.scene import Sprite, disk_sprite
+    from twin.scene import Sprite, disk_sprite
 
     spr = Sprite(*disk_sprite(4.3))
     spr.B = spr.B[None]
@@ -226,7 +227,7 @@ def test_highlight_sits_where_the_normal_bisects_lamp_and_camera():
     """Glossy highlight of one distant lamp at elevation e, azimuth a (camera far above): the
     normal bisects them, tilt (90 deg - e) / 2, so the highlight's peak lies R sin(tilt) from
     the centre toward the lamp (independent closed form)."""
-    from measurement.lighting import Lamp, LightingSpec, ball_sprites
+    from twin.lighting import Lamp, LightingSpec, ball_sprites
 
     R = 6.0
     for elev, az in ((math.radians(30), 0.4), (math.radians(60), 2.5)):
@@ -244,7 +245,7 @@ def test_highlight_sits_where_the_normal_bisects_lamp_and_camera():
 
 
 def test_channel_wall_hides_low_lamps_behind_it():
-    from measurement.lighting import LightingSpec, wall_visibility
+    from twin.lighting import LightingSpec, wall_visibility
 
     spec = LightingSpec("ring", (), 0.0, 0.2, 0.3, 1.0, 10.0, 0.0, 0.0, wall_height=2.5e-3,
                         wall_soft=0.3e-3)
@@ -254,3 +255,21 @@ def test_channel_wall_hides_low_lamps_behind_it():
     assert wall_visibility(spec, c, np.array([-0.3, 0.0, 0.05])) == 1.0        # across the axis
     assert wall_visibility(spec.__class__(**{**spec.__dict__, "wall_height": 0.0}), c,
                            np.array([0.3, 0.0, 0.05])) == 1.0
+
+
+def test_truth_csv_old_column_names_still_read(tmp_path):
+    """truth.csv files written before the spelling was unified (centre_x_px, ...) read back
+    under the new names, the same numbers."""
+    values = {name: np.arange(3.0) + j for j, name in enumerate(TRUTH_COLUMNS)}
+    from twin.truth_csv import OLD_NAMES, truth_csv_text
+    text = truth_csv_text(TRUTH_COLUMNS, values)
+    new_to_old = {v: k for k, v in OLD_NAMES.items()}
+    head, body = text.split("\n", 1)
+    old = ",".join(new_to_old.get(h, h) for h in head.split(",")) + "\n" + body
+    assert "centre_x_px" in old
+    (tmp_path / "new.csv").write_text(text)
+    (tmp_path / "old.csv").write_text(old)
+    a, b = read_truth_csv(tmp_path / "new.csv"), read_truth_csv(tmp_path / "old.csv")
+    assert list(a) == list(b) == list(TRUTH_COLUMNS)
+    for name in TRUTH_COLUMNS:
+        np.testing.assert_array_equal(a[name], b[name])

@@ -27,8 +27,9 @@ import pytest
 from abu_model.errors import ParameterError
 from fmus.ssp import NS, SSD_NAME, Experiment, read_default_experiment, read_fmu_interface, \
     write_ssp
-from harness.cli import build_parser, main, staircase_from_args
-from harness.experiments import ensure_fmus, run_staircase
+from abu.cli.main import build_parser, main
+from abu.cli.options_cosim import staircase_from_args
+from harness.experiments.staircase import ensure_fmus, run_staircase
 
 H = 1e-3  # communication step of the default export [s]
 BOUNDS_RTOL = 1e-3  # the 0.1 %
@@ -230,7 +231,7 @@ def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys):
 
 def test_write_ssp_refuses_what_no_host_could_run(tmp_path, reference):
     from fmus.ssp import SspError
-    from harness.system import Connection
+    from harness.cosim.system import Connection
 
     exp, _ = reference
     system = exp.system(ensure_fmus())
@@ -307,7 +308,7 @@ def staircase_family(n: int, seed: int):
     import random
 
     from abu_model.params import BallParams, PlantParams
-    from harness.experiments import StaircaseExperiment
+    from harness.experiments.staircase import StaircaseExperiment
 
     rng, hz, out = random.Random(seed), 2 * math.pi, []
     while len(out) < n:

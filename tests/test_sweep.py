@@ -6,9 +6,9 @@ import pytest
 
 from abu_model.errors import ParameterError
 from abu_model.params import PlantParams
-from harness.cli import main
-from harness.experiments import StaircaseExperiment, run_staircase
-from harness.sweep import run_sweep, sweep_grid
+from abu.cli.main import main
+from harness.experiments.staircase import StaircaseExperiment, run_staircase
+from harness.experiments.sweep import run_sweep, sweep_grid
 
 HZ = 2 * math.pi
 

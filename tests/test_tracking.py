@@ -1,6 +1,6 @@
 """Marker tracking: sub-pixel accuracy against rendered truth, lost-marker flags, marker roles.
 
-Truth: frames rendered by measurement.render from known disk centres (area-exact antialiasing,
+Truth: frames rendered by twin.render from known disk centres (area-exact antialiasing,
 Gaussian noise, 8-bit quantisation). Accuracy figures are RMS of the Euclidean centre error
 (sqrt of the mean of dx^2 + dy^2) [px]; run with ``-s`` to see every method's figures.
 """
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from abu_model.errors import ParameterError
-from measurement.markers import MarkerError, find_markers, format_seeds, parse_seeds
-from measurement.render import (CameraGeometry, MarkerStyle, RenderSettings, render_frames,
+from measurement.imaging.markers import MarkerError, find_markers, format_seeds, parse_seeds
+from twin.render import (CameraGeometry, MarkerStyle, RenderSettings, render_frames,
                                 render_markers)
-from measurement.tracking import (FIT_FAILED, JUMP, LOW_CONTRAST, METHODS, TOUCHES_EDGE,
+from measurement.imaging.tracking import (FIT_FAILED, JUMP, LOW_CONTRAST, METHODS, TOUCHES_EDGE,
                                   TrackingError, track_recording)
 
 CONTRAST = 120.0  # marker plateau over background [grey levels]
@@ -242,7 +242,7 @@ def test_find_markers_on_the_rendered_two_spot_recording_with_a_vignetted_cd_mar
     """Rendered seed 149 of the harsh family (two reflections on the ball, the CD marker at the
     frame's edge): refused before ("found 2 marker candidates"); the candidates are now
     counted after the reflections are merged, and the second look finds the CD marker."""
-    from measurement.scenario import random_scenario, render_scenario_frames, \
+    from twin.scenario import random_scenario, render_scenario_frames, \
         simulate_scenario
     scn = random_scenario(149).with_(n_frames=3)
     assert scn.lighting.reflections == 2
@@ -297,12 +297,12 @@ def test_parse_seeds():
 
 
 # --------------------------------------------------------------------------------------------
-# the ball under the harsh twin's lighting (measurement.scenario): accuracy of its centre
+# the ball under the harsh twin's lighting (twin.scenario): accuracy of its centre
 
 
 def _lit_recording(seed: int, lighting: str, n: int = 400):
     """n frames of a harsh-twin scenario (size 200) and the true ball centres [px]."""
-    from measurement.scenario import random_scenario, render_scenario_frames, simulate_scenario
+    from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario
 
     scn = random_scenario(seed, size=200, lighting=lighting).with_(n_frames=n)
     st, pos = simulate_scenario(scn)
@@ -323,7 +323,7 @@ def test_ball_centre_accuracy_under_each_lighting():
     """Ball centre error [px] against the geometric truth on harsh-twin recordings (8 seeds per
     lighting, 400 frames each). TL ring: the default tracker. Two spots: the default tracker,
     the report's mean of the two reflections (``pair``) and our silhouette fit (``outline``)."""
-    from measurement.reflections import track_with_reflections
+    from measurement.imaging.reflections import track_with_reflections
 
     seeds_ = range(8)
     rows = {"ring/default": [], "two_spot/default": [], "two_spot/pair": [],
@@ -355,10 +355,10 @@ def test_ball_centre_accuracy_under_each_lighting():
 def test_two_reflections_never_silently(tmp_path):
     """Default tracking refuses a two-reflection recording it cannot fit, naming the option;
     --ball-reflections 2 tracks it (both ball methods), with the ball within 0.5 px."""
-    from measurement.cli import main
-    from measurement.frames_io import write_npy
-    from measurement.markers import find_markers
-    from measurement.reflections import track_with_reflections
+    from abu.cli.main import main
+    from measurement.imaging.frames_io import write_npy
+    from measurement.imaging.markers import find_markers
+    from measurement.imaging.reflections import track_with_reflections
 
     frames, seeds, true = _lit_recording(12, "two_spot", n=300)
     found, _ = find_markers(frames[0], ball_reflections=2)

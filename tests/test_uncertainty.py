@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from abu_model.errors import ParameterError
-from measurement.analysis import AnalysisOptions, analyse_tracks
-from measurement.interval import mu_required
-from measurement.uncertainty import (monte_carlo, perturbed_mu_factor, pixel_noise,
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+from measurement.inference.running_max import mu_required
+from measurement.inference.uncertainty import (monte_carlo, perturbed_mu_factor, pixel_noise,
                                      widen_interval, worst_case_relative_error)
 from synthetic_tracks import measured_pixels, simulate
 

@@ -1,5 +1,5 @@
 """The reported set is the intersection of the sets of several Savitzky-Golay windows, each at
-level 1 - alpha / K (measurement.window_sets): the combination rules, and on the harsh-twin
+level 1 - alpha / K (measurement.inference.window_sets): the combination rules, and on the harsh-twin
 tracks family that it is sharper than the primary window alone while every set still holds mu.
 """
 from __future__ import annotations
@@ -11,9 +11,9 @@ import pytest
 
 from abu_model.errors import ParameterError
 
-from measurement.analysis import AnalysisOptions, analyse_tracks, inference_windows
-from measurement.inference_types import LOST_ACROSS_SLIP, Inference
-from measurement.window_sets import intersect_sets, level_each
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks, inference_windows
+from measurement.inference.types import LOST_ACROSS_SLIP, Inference
+from measurement.inference.window_sets import intersect_sets, level_each
 
 from test_inference import scenario_tracks
 

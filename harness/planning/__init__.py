@@ -1,0 +1,1 @@
+"""Experiment planning: identify the speed loop, design a staircase, propose the next run."""

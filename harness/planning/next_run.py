@@ -1,0 +1,77 @@
+"""``abu next``: the run that shrinks the combined interval on mu most.
+
+The intervals measured so far (``abu measure`` summaries, or ``abu simulate`` summaries of
+co-simulated runs) all contain mu, so mu lies in their intersection [L, H]. The next run is the
+staircase :func:`harness.planning.design.design_staircase` plans for the prior range [L, H]: for every
+mu there it keeps the ball stuck through the first step, puts the slip inside the record and
+has the smallest worst-case predicted interval. Its predicted combined interval at mu is
+[max(L, low(mu)), min(H, high(mu))]; the proposal reports its worst case over [L, H] beside
+the current width.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, Sequence
+
+import numpy as np
+
+from abu_model.errors import AbuError
+
+from harness.planning.design import Design, DesignSpec, design_staircase
+
+
+class IntervalsError(AbuError):
+    """The given intervals cannot be combined (unreadable, unbounded or disjoint)."""
+
+
+def combine(intervals: Sequence[dict[str, Any]]) -> tuple[float, float]:
+    """Intersection [L, H] of the intervals; IntervalsError if it is empty."""
+    lo = max(i["mu_low"] for i in intervals)
+    hi = min(i["mu_high"] for i in intervals)
+    if not lo < hi:
+        raise IntervalsError(
+            f"the intervals have no common point (largest lower bound {lo:.6g} >= smallest upper "
+            f"bound {hi:.6g}): " + ", ".join(f"{i['name']} [{i['mu_low']:.6g}, "
+                                             f"{i['mu_high']:.6g}]" for i in intervals))
+    return lo, hi
+
+
+@dataclass
+class Proposal:
+    """The proposed next run and its predicted effect."""
+
+    current: tuple[float, float]
+    design: Design
+    combined_low: np.ndarray
+    combined_high: np.ndarray
+
+    @property
+    def worst_combined_width(self) -> float:
+        """Largest predicted width of the combined interval over the range [-]."""
+        return float(np.max(self.combined_high - self.combined_low))
+
+    def as_dict(self) -> dict[str, Any]:
+        lo, hi = self.current
+        d = self.design.as_dict()
+        return {"kind": "abu-next", "format_version": 1, "current_interval": [lo, hi],
+                "current_width": hi - lo,
+                "predicted_worst_combined_width": self.worst_combined_width,
+                "predicted_median_combined_width":
+                    float(np.median(self.combined_high - self.combined_low)),
+                "predicted_combined": [{"mu": float(m), "mu_low": float(a), "mu_high": float(b)}
+                                       for m, a, b in zip(self.design.mu, self.combined_low,
+                                                          self.combined_high)],
+                "design": d, "simulate_args": d["simulate_args"]}
+
+
+def propose_next(intervals: Sequence[dict[str, Any]], spec: DesignSpec | None = None
+                 ) -> Proposal:
+    """The staircase designed for the combined interval, with its predicted combined interval.
+
+    ``spec`` gives everything but the range (drive, limits, camera); its range is replaced.
+    """
+    lo, hi = combine(intervals)
+    base = spec or DesignSpec(lo, hi)
+    design = design_staircase(replace(base, mu_lo=lo, mu_hi=hi))
+    return Proposal((lo, hi), design, np.maximum(design.mu_low, lo),
+                    np.minimum(design.mu_high, hi))

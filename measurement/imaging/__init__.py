@@ -1,0 +1,1 @@
+"""Imaging: recordings (frames) -> the three marker tracks [px]; the camera lens."""

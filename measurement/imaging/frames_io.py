@@ -1,0 +1,441 @@
+"""Read and write high-speed camera recordings as one (N, H, W) uint8 array.
+
+Accepted inputs (``read_recording``):
+
+* a folder of 8-bit grayscale frames (PNG, BMP or TIFF), read in natural name order
+  (``f2.png`` before ``f10.png``); a folder holding a single multi-page TIFF or ``.npy`` stack
+  (e.g. a twin's output folder) is read as that stack;
+* a multi-page TIFF (tifffile);
+* a ``.npy`` stack (N, H, W) uint8, memory-mapped (nothing is read until used);
+* any video file OpenCV can decode (converted to grayscale; lossy codecs alter the pixels).
+
+Frames may be 8- or 16-bit, grey or colour (RGB / BGR, alpha ignored): 16-bit and colour frames
+are converted to 8-bit grey on reading (:mod:`sample_formats`; the recording's ``source`` says
+what was converted). Other sample types (float, 32-bit) are refused.
+
+Every problem raises :class:`RecordingError` naming the file and, where it applies, the frame.
+A multi-page TIFF or ``.npy`` stack of 3072 frames of 256x256 reads in well under a second;
+3072 separate image files take longer than tracking them (see the benchmark).
+"""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from abu_model.atomic_io import atomic_open
+
+from measurement.imaging import sample_formats as fmt
+from measurement.imaging.recording_checks import (  # noqa: F401  (re-exported names)
+    MAX_FRAMES, MAX_PIXELS, RecordingError, check_size, check_tiff_complete, tifffile_messages)
+
+#: File name endings read as single frames in a folder.
+FRAME_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
+TIFF_SUFFIXES = (".tif", ".tiff")
+#: Endings tried as video files (anything else unknown is tried as video too, last).
+VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv", ".cine")
+
+
+@dataclass
+class Recording:
+    """A recording in memory (or memory-mapped).
+
+    Attributes:
+        frames: (N, H, W) uint8 array, C order; frame index first. Pixel (row, col) = (y, x).
+        source: human-readable description of where it came from (path and format).
+        frame_names: for a folder of frames, the file name of each frame (for messages);
+            None for stacks and videos.
+    """
+
+    frames: np.ndarray
+    source: str
+    frame_names: list[str] | None = field(default=None)
+
+    def __len__(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """(N, H, W): number of frames, height and width [px]."""
+        return tuple(int(s) for s in self.frames.shape)  # type: ignore[return-value]
+
+    def frame_label(self, index: int) -> str:
+        """``frame <index>`` plus its file name when known, for error messages."""
+        if self.frame_names is not None and 0 <= index < len(self.frame_names):
+            return f"frame {index} ({self.frame_names[index]})"
+        return f"frame {index}"
+
+
+def natural_key(name: str) -> list:
+    """Sort key that orders embedded numbers by value: ``img2`` < ``img10``."""
+    return [int(tok) if tok.isdigit() else tok.lower() for tok in re.split(r"(\d+)", name)]
+
+
+def check_stack(frames: np.ndarray, where: str) -> np.ndarray:
+    """Check ``frames`` is an (N, H, W) uint8 stack with N >= 1; return it (2-D -> 1 frame).
+
+    Raises:
+        RecordingError: naming ``where`` and what was expected.
+    """
+    if not isinstance(frames, np.ndarray):
+        raise RecordingError(f"{where}: expected a numpy array of frames, got {type(frames).__name__}")
+    if frames.dtype != np.uint8:
+        raise RecordingError(f"{where}: frames have dtype {frames.dtype}; expected 8-bit "
+                             "grayscale (uint8)")
+    if frames.ndim == 2:
+        frames = frames[np.newaxis]
+    if frames.ndim != 3:
+        hint = " (colour frames? convert to 8-bit grayscale)" if frames.ndim == 4 else ""
+        raise RecordingError(f"{where}: frames have shape {frames.shape}; expected (N, H, W)"
+                             f"{hint}")
+    if frames.shape[0] < 1 or frames.shape[1] < 1 or frames.shape[2] < 1:
+        raise RecordingError(f"{where}: empty recording, shape {frames.shape}")
+    return frames
+
+
+def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
+    """Read a recording (folder of frames, multi-page TIFF, ``.npy`` stack or video).
+
+    Args:
+        path: file or folder.
+        mmap: memory-map ``.npy`` stacks and contiguous uncompressed TIFF stacks (fast open;
+            pages are read on first use).
+
+    Returns:
+        A :class:`Recording` with ``frames`` of shape (N, H, W), dtype uint8.
+
+    Raises:
+        RecordingError: nonexistent path, empty folder, unreadable or missing frame, wrong
+            dtype (not uint8), colour frames or frames of differing sizes; the message names
+            the file and the frame.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise RecordingError(f"recording '{p}' does not exist")
+    if p.is_dir():
+        return _read_folder(p)
+    suffix = p.suffix.lower()
+    if suffix == ".npy":
+        return _read_npy(p, mmap=mmap)
+    if suffix in TIFF_SUFFIXES:
+        return _read_tiff(p, mmap=mmap)
+    if suffix in (".png", ".bmp"):
+        frame, colour = _read_single_frame(p, 0, None)
+        frame, note = _convert(frame[np.newaxis], was_colour=colour)
+        return Recording(frame, f"image file {p}{note}", [p.name])
+    return _read_video(p)
+
+
+def _check_sample_type(dtype: np.dtype, where: str) -> None:
+    if dtype not in fmt.SAMPLE_TYPES:
+        raise RecordingError(f"{where}: frames have dtype {dtype}; expected 8- or 16-bit "
+                             "unsigned samples (uint8 or uint16), grey or colour")
+
+
+def _grey(img: np.ndarray, where: str, order: str = "BGR") -> np.ndarray:
+    """One image as grey: (H, W) as is, (H, W, 3|4) colour (``order``, alpha ignored) by luma."""
+    if img.ndim == 3 and img.shape[-1] in (3, 4):
+        _check_sample_type(img.dtype, where)
+        return fmt.luma(img, order)
+    if img.ndim != 2:
+        raise RecordingError(f"{where} is an image of shape {img.shape}; expected grey (H, W) or "
+                             "colour (H, W, 3|4)")
+    return img
+
+
+def _convert(frames: np.ndarray, *, colour_axis: bool = False,
+             order: str = "RGB", was_colour: bool = False) -> tuple[np.ndarray, str]:
+    """uint8 grey frames and the source text's conversion note ('' if none); ``colour_axis``:
+    the last axis holds colour samples to convert; ``was_colour``: converted already."""
+    if not isinstance(frames, np.ndarray) or frames.dtype not in fmt.SAMPLE_TYPES:
+        return frames, ""  # check_stack names the problem
+    colour = colour_axis and frames.shape[-1] in (3, 4)
+    if colour:
+        frames = fmt.luma(frames, order)
+    frames, note = fmt.to_uint8(frames)
+    return frames, fmt.describe(colour or was_colour, note)
+
+
+def _read_npy(p: Path, *, mmap: bool) -> Recording:
+    try:
+        frames = np.load(p, mmap_mode="r" if mmap else None, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise RecordingError(f"cannot read .npy stack '{p}': {exc}") from None
+    if not isinstance(frames, np.ndarray):  # an .npz archive under a .npy name
+        raise RecordingError(f"'{p}' is not a .npy array (an archive?); expected one (N, H, W) "
+                             "uint8 stack")
+    if frames.ndim == 2 and frames.dtype in fmt.SAMPLE_TYPES:
+        # A 2-D array would be read as one frame of N x H: almost surely a mistake.
+        raise RecordingError(f"'{p}' holds an array of shape {frames.shape}; expected a stack "
+                             "(N, H, W) of 8-bit frames (save one frame as shape (1, H, W))")
+    _check_sample_type(frames.dtype, f"'{p}'")
+    check_size(frames.shape[:3], f"'{p}'")  # before anything is read into memory
+    frames, note = _convert(frames, colour_axis=frames.ndim == 4, order="RGB")
+    frames = check_stack(frames, f"'{p}'")
+    if not frames.flags.c_contiguous:
+        frames = np.ascontiguousarray(frames)
+    return Recording(frames, f".npy stack {p}{note}")
+
+
+def _mapped_series(p: Path, tif, series) -> np.ndarray | None:
+    """The series memory-mapped where its pixels lie contiguous and uncompressed in the file
+    (as every camera's and our own writer's stacks do), else None. Pages are read on first
+    use: ``abu measure`` on 3072 frames saves the ~0.3 s copy of ``asarray`` (measured)."""
+    offset = series.dataoffset
+    if offset is None or series.dtype is None:
+        return None
+    dtype = np.dtype(series.dtype).newbyteorder(tif.byteorder)
+    if not dtype.isnative:
+        return None     # the conversions expect native samples: asarray swaps the bytes
+    if offset + int(np.prod(series.shape)) * dtype.itemsize > p.stat().st_size:
+        return None     # a cut file: asarray (and its messages) decides
+    return np.memmap(p, dtype=dtype, mode="r", offset=offset, shape=tuple(series.shape))
+
+
+def _read_tiff(p: Path, *, mmap: bool = True) -> Recording:
+    import tifffile
+
+    n_pages = None  # known once the structure is checked
+    try:
+        with tifffile_messages() as messages, tifffile.TiffFile(p) as tif:
+            pages = tif.pages
+            if len(pages) == 0:
+                raise RecordingError(f"TIFF '{p}' holds no frames")
+            check_tiff_complete(p, tif, messages)
+            n_pages = len(pages)
+            series = tif.series
+            if len(series) > 1:
+                _raise_differing_pages(p, tif)
+            s = series[0]
+            axes = s.axes
+            if "S" in axes and not (axes.endswith("S") and s.shape[-1] in (3, 4)):
+                raise RecordingError(f"TIFF '{p}': frames with samples on axes {axes}, shape "
+                                     f"{s.shape}; expected grey or RGB(A) pages")
+            _check_sample_type(s.dtype, f"TIFF '{p}'")
+            colour = "S" in axes
+            frames = _mapped_series(p, tif, s) if mmap else None
+            if frames is None:
+                frames = s.asarray()
+    except RecordingError:
+        raise
+    except Exception as exc:  # tifffile raises many types on corrupt files
+        colour = False
+        frames = _cv2_read_multi(p)  # e.g. LZW compression without the imagecodecs package
+        if frames is None or n_pages is None or frames.shape[0] != n_pages:
+            # the fallback only decodes what a checked structure describes, page for page
+            raise RecordingError(f"cannot read TIFF '{p}': {' '.join(str(exc).split())}") \
+                from None
+    if colour:
+        frames = fmt.luma(frames, "RGB")
+    frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
+    frames, note = _convert(frames, was_colour=colour)
+    return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}{note}")
+
+
+def _raise_differing_pages(p: Path, tif) -> None:
+    """Name the first page whose shape or dtype differs from page 0."""
+    first = tif.pages[0]
+    for i, page in enumerate(tif.pages):
+        if page.shape != first.shape or page.dtype != first.dtype:
+            raise RecordingError(
+                f"TIFF '{p}': frame {i} has shape {page.shape} and dtype {page.dtype}, frame 0 "
+                f"has shape {first.shape} and dtype {first.dtype}; all frames must match")
+    raise RecordingError(f"TIFF '{p}' holds several image series; expected one stack of frames")
+
+
+def _cv2_read(f: Path) -> np.ndarray | None:
+    import cv2
+
+    return cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+
+
+def _cv2_read_multi(p: Path) -> np.ndarray | None:
+    """All pages of a TIFF via OpenCV (fallback for codecs tifffile lacks); None on failure."""
+    import cv2
+
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # one line on stderr
+    try:
+        ok, pages = cv2.imreadmulti(str(p), flags=cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        ok, pages = False, []
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if not ok or not pages:
+        return None
+    pages = [_grey(page, f"TIFF '{p}': frame {i}") for i, page in enumerate(pages)]
+    first = pages[0]
+    for i, page in enumerate(pages):
+        _check_sample_type(page.dtype, f"TIFF '{p}': frame {i}")
+        if page.dtype != first.dtype:
+            raise RecordingError(f"TIFF '{p}': frame {i} has dtype {page.dtype}, frame 0 has "
+                                 f"{first.dtype}; all frames must match")
+        if page.shape != first.shape:
+            raise RecordingError(f"TIFF '{p}': frame {i} has shape {page.shape}, frame 0 has "
+                                 f"shape {first.shape}; all frames must match")
+    return np.stack(pages)
+
+
+def _read_single_frame(f: Path, index: int, shape: tuple[int, int] | None,
+                       dtype: np.dtype | None = None) -> tuple[np.ndarray, bool]:
+    """Read one frame as grey, uint8 or uint16 (colour converted); check it against ``shape``
+    and ``dtype`` (the first frame's). Returns (frame, whether it was colour)."""
+    label = f"frame {index} ('{f}')"
+    order = "BGR"  # OpenCV's
+    if f.suffix.lower() in TIFF_SUFFIXES:
+        import tifffile
+
+        try:
+            with tifffile.TiffFile(f) as tif:
+                if len(tif.pages) != 1:
+                    raise RecordingError(f"{label}: a TIFF with {len(tif.pages)} pages in a "
+                                         "folder of single frames; pass the file itself")
+                img = tif.pages[0].asarray()
+                order = "RGB"  # TIFF's
+        except RecordingError:
+            raise
+        except Exception as exc:
+            img = _cv2_read(f)  # e.g. LZW compression without the imagecodecs package
+            if img is None:
+                raise RecordingError(f"{label} is unreadable: {exc}") from None
+    else:
+        img = _cv2_read(f)
+        if img is None:
+            raise RecordingError(f"{label} is unreadable (not a valid image file)")
+    colour = img.ndim == 3 and img.shape[-1] in (3, 4)
+    img = _grey(img, label, order)
+    _check_sample_type(img.dtype, label)
+    if dtype is not None and img.dtype != dtype:
+        raise RecordingError(f"{label} has dtype {img.dtype}; frame 0 has {dtype}; all frames "
+                             "must match")
+    if shape is not None and img.shape != shape:
+        raise RecordingError(f"{label} has size {img.shape[1]}x{img.shape[0]} px (WxH); frame 0 "
+                             f"has {shape[1]}x{shape[0]} px; all frames must match")
+    return img, colour
+
+
+def _read_folder(p: Path) -> Recording:
+    files = [f for f in p.iterdir() if f.is_file() and not f.name.startswith(".")]
+    stacks = [f for f in files if f.suffix.lower() == ".npy"]
+    images = sorted((f for f in files if f.suffix.lower() in FRAME_SUFFIXES),
+                    key=lambda f: natural_key(f.name))
+    if not images and len(stacks) == 1:
+        return _read_npy(stacks[0], mmap=True)
+    if not images:
+        raise RecordingError(f"folder '{p}' holds no frames (expected {', '.join(FRAME_SUFFIXES)}"
+                             " files or one .npy stack)")
+    if len(images) == 1 and images[0].suffix.lower() in TIFF_SUFFIXES:
+        return _read_tiff(images[0])  # a single (possibly multi-page) TIFF: the stack itself
+    _check_numbering(p, images)
+    first, colour = _read_single_frame(images[0], 0, None)
+    frames = np.empty((len(images),) + first.shape, dtype=first.dtype)
+    frames[0] = first
+    for i, f in enumerate(images[1:], start=1):
+        frames[i], colour_i = _read_single_frame(f, i, first.shape, first.dtype)
+        colour = colour or colour_i
+    frames, note = _convert(frames, was_colour=colour)
+    return Recording(frames, f"folder of {len(images)} frames {p}{note}",
+                     [f.name for f in images])
+
+
+def _check_numbering(p: Path, images: list[Path]) -> None:
+    """If the frames are numbered (``<prefix><number><suffix>``), the numbers must be consecutive.
+
+    A gap means a frame is missing, which would silently shift the time base of every later
+    frame; a repeated number means two files claim the same frame.
+    """
+    parsed = [re.fullmatch(r"(.*?)(\d+)(\D*)", f.name) for f in images]
+    if len(images) < 2 or not all(parsed):
+        return
+    stems = {(m.group(1), m.group(3).lower()) for m in parsed}
+    if len(stems) != 1:
+        return  # not one numbered series: keep the natural order only
+    numbers = [int(m.group(2)) for m in parsed]
+    for i in range(1, len(numbers)):
+        if numbers[i] == numbers[i - 1]:
+            raise RecordingError(f"folder '{p}': '{images[i - 1].name}' and '{images[i].name}' "
+                                 f"both claim frame number {numbers[i]}")
+        if numbers[i] != numbers[i - 1] + 1:
+            missing = numbers[i - 1] + 1
+            raise RecordingError(
+                f"folder '{p}': frame number {missing} is missing (between '{images[i - 1].name}'"
+                f" and '{images[i].name}'); frames must be numbered consecutively")
+
+
+def _read_video(p: Path) -> Recording:
+    import cv2
+
+    cap = cv2.VideoCapture(str(p))
+    try:
+        if not cap.isOpened():
+            raise RecordingError(
+                f"cannot read '{p}': not a folder of frames, a multi-page TIFF, a .npy stack or a "
+                "video file OpenCV can decode")
+        frames = []
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                break
+            if img.ndim == 3:
+                img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+            if img.dtype != np.uint8:
+                raise RecordingError(f"video '{p}', frame {len(frames)}: dtype {img.dtype}; "
+                                     "expected 8 bits per pixel")
+            if frames and img.shape != frames[0].shape:
+                raise RecordingError(f"video '{p}', frame {len(frames)}: size {img.shape} differs "
+                                     f"from frame 0 ({frames[0].shape})")
+            frames.append(img)
+    finally:
+        cap.release()
+    if not frames:
+        raise RecordingError(f"video '{p}' holds no readable frames")
+    return Recording(np.stack(frames), f"video {p} (converted to grayscale)")
+
+
+def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray) -> Path:
+    """Write an (N, H, W) uint8 stack as one multi-page grayscale TIFF, atomically.
+
+    Returns the path written. Raises :class:`RecordingError` if ``frames`` is not a stack.
+    """
+    import tifffile
+
+    target = Path(path)
+    frames = check_stack(np.asarray(frames), f"frames for '{target}'")
+    with atomic_open(target, "wb") as handle:
+        tifffile.imwrite(handle, frames, photometric="minisblack", contiguous=True)
+    return target
+
+
+def write_npy(path: str | os.PathLike, frames: np.ndarray) -> Path:
+    """Write an (N, H, W) uint8 stack as a ``.npy`` file, atomically. Returns the path."""
+    target = Path(path)
+    frames = check_stack(np.asarray(frames), f"frames for '{target}'")
+    with atomic_open(target, "wb") as handle:
+        np.save(handle, np.ascontiguousarray(frames), allow_pickle=False)
+    return target
+
+
+def write_frame_folder(folder: str | os.PathLike, frames: np.ndarray, *, suffix: str = ".png",
+                       prefix: str = "frame") -> Path:
+    """Write each frame as ``<prefix><index>.png`` (or .bmp/.tif) in ``folder``, atomically per file.
+
+    Names carry no zero padding on purpose: the reader's natural order must handle them.
+    """
+    import cv2
+
+    suffix = suffix.lower()
+    if suffix not in FRAME_SUFFIXES:
+        raise RecordingError(f"frame file type '{suffix}': expected one of {FRAME_SUFFIXES}")
+    folder = Path(folder)
+    frames = check_stack(np.asarray(frames), f"frames for '{folder}'")
+    folder.mkdir(parents=True, exist_ok=True)
+    for i, img in enumerate(frames):
+        ok, buf = cv2.imencode(suffix, img)
+        if not ok:
+            raise RecordingError(f"cannot encode frame {i} as {suffix}")
+        with atomic_open(folder / f"{prefix}{i}{suffix}", "wb") as handle:
+            handle.write(buf.tobytes())
+    return folder

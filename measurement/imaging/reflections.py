@@ -1,0 +1,306 @@
+"""The ball under two reflections (report sec. 5.2, indirect lighting with two spots).
+
+Under that lighting the brass ball shows a faint body and two small, often saturated
+reflections of the two spots. A single-marker tracker sees two blobs in the ball's window and
+cannot fit one circle (it flags the ball lost: never a silent wrong centre). Two ways to get the
+ball centre (``ball_method``):
+
+* ``pair`` (the report's way): one marker per reflection, the ball = their mean. Each
+  reflection is located as the intensity-weighted centroid of the pixels above 60 % of the
+  window's range, split into two groups along their principal axis. The mean of the two
+  reflections is *not* the ball centre: each reflection sits where the ball's normal bisects
+  the lamp and camera directions, so the mean is offset toward the lamps' mean azimuth by
+  R sin(tilt), and that offset changes with the ball's world angle (the lamps are at a finite
+  distance): a harmonic disturbance of beta, as in the report.
+* ``outline`` (default, ours): the ball's silhouette. The window is plane-corrected on its
+  border (as the default tracker), the reflections are clipped to the body level b (median of
+  the inner disk), a circle is fitted to the sub-pixel crossings of the level b/3, then
+  refitted on 36 radial profiles, each crossed half-way between its own inside and outside
+  levels (robust to one side of the body being dimmer), with outlier rejection. The outline
+  does not depend on where the reflections are, only (weakly) on the shading of the body.
+
+:func:`track_with_reflections` tracks the ABU centre and CD markers with the default tracker
+and the ball with one of these, returning ordinary :class:`tracking.Tracks` (3 markers). A
+ball window without two reflections (``pair``) or without a plausible outline (``outline``)
+is flagged lost with its reason, exactly like a lost marker.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from abu_model.errors import ParameterError
+
+from measurement.imaging import tracking as T
+from measurement.imaging import window_fits as W
+
+BALL_METHODS = ("outline", "pair")
+DEFAULT_BALL_METHOD = "outline"
+#: Level of the silhouette as a fraction of the body level [-] (first fit).
+LEVEL = 0.33
+#: Refit the silhouette on 72 radial profiles ...
+EDGE_REFINE = True
+#: ... at each ray's half-way level ("local") or at its steepest point ("gradient").
+EDGE_MODE = "local"
+#: Reason code for a ball window without two separate reflections.
+NO_PAIR = T.FIT_FAILED
+
+
+def _plane_corrected(G: np.ndarray, geo: "W.WindowGeometry") -> tuple[np.ndarray, np.ndarray]:
+    K, w, _ = G.shape
+    flat = G.reshape(K, w * w)
+    ring = flat[:, geo.ring]
+    coef = np.einsum("kp,cp->kc", ring, geo.plane_pinv)
+    noise = (ring - np.einsum("kc,cp->kp", coef, geo.plane_basis[:, geo.ring])).std(axis=1)
+    return (flat - np.einsum("kc,cp->kp", coef, geo.plane_basis)).reshape(K, w, w), noise
+
+
+def refine_pair(G: np.ndarray, geo, opts: "T.TrackingOptions"
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Report's way on windows G (K, w, w): mean of the two reflections' centroids.
+
+    Returns centre a, b (window coordinates) [px], separation of the reflections [px] (in
+    place of a radius) and reason codes.
+    """
+    K, w, _ = G.shape
+    H, noise = _plane_corrected(G, geo)
+    flat = H.reshape(K, w * w)
+    hi = flat.max(axis=1)
+    thr = 0.6 * hi
+    W = np.maximum(H - thr[:, None, None], 0.0).reshape(K, w * w)
+    yy, xx = np.divmod(np.arange(w * w), w)
+    m0 = W.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cx = (W @ xx) / m0
+        cy = (W @ yy) / m0
+        dx = xx[None, :] - cx[:, None]
+        dy = yy[None, :] - cy[:, None]
+        sxx = (W * dx * dx).sum(1) / m0
+        syy = (W * dy * dy).sum(1) / m0
+        sxy = (W * dx * dy).sum(1) / m0
+        ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)            # principal axis
+        proj = dx * np.cos(ang)[:, None] + dy * np.sin(ang)[:, None]
+        out = []
+        for side in (proj < 0, proj >= 0):
+            Ws = W * side
+            ms = Ws.sum(1)
+            out.append(((Ws @ xx) / ms, (Ws @ yy) / ms, ms))
+    (x1, y1, m1), (x2, y2, m2) = out
+    a, b = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
+    sep = np.hypot(x2 - x1, y2 - y1)
+    # each group must be a compact spot: its weighted spread well below the separation
+    reason = np.zeros(K, dtype=np.uint8)
+    bad = ~np.isfinite(a) | (m1 <= 0) | (m2 <= 0) | (sep < 1.5) | (sep > w / 2.0)
+    bad |= np.sqrt(np.abs(sxx + syy)) < 0.35 * sep            # one blob, not two
+    reason[bad] = NO_PAIR
+    reason[(hi < opts.min_contrast) | (hi < opts.min_snr * noise)] = T.LOW_CONTRAST
+    return a, b, sep, reason
+
+
+def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float,
+                   edges: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Our way: circle fit to the ball's silhouette with the reflections clipped.
+
+    ``radius_px``: the ball's expected image radius [px] (sets the inner disk whose median
+    gives the body level). Returns centre a, b [px], radius [px], reason codes.
+    """
+    K, w, _ = G.shape
+    H, noise = _plane_corrected(G, geo)
+    c = (w - 1) / 2.0
+    yy, xx = np.mgrid[0:w, 0:w]
+    inner = np.hypot(xx - c, yy - c) <= 0.6 * radius_px
+    body = np.median(H.reshape(K, -1)[:, inner.ravel()], axis=1).astype(np.float32)
+    Hc = np.minimum(H, body[:, None, None])                  # reflections -> body level
+    if opts.smooth:
+        Hc = W.smooth3(Hc)
+        off = 1
+    else:
+        off = 0
+    # the limb is darker than the top (shading) and the PSF spreads the edge: the silhouette
+    # is where the profile falls to a third of the body level
+    level = (LEVEL * body).astype(np.float32)
+    kk, xs, ys, above = W.crossings(Hc, level)
+    a, b, r, rms, cnt = W.robust_circle(kk, xs, ys, K)
+    if EDGE_REFINE and edges:
+        a, b, r, rms, cnt = _gradient_edge(Hc, a, b, r)
+    a += off
+    b += off
+    reason = np.zeros(K, dtype=np.uint8)
+    bad = ~np.isfinite(a) | (cnt < opts.min_points) | (rms > opts.max_residual)
+    bad |= np.abs(r - radius_px) > max(1.0, 0.3 * radius_px)
+    reason[bad] = T.FIT_FAILED
+    touches = (above[:, 0, :].any(1) | above[:, -1, :].any(1) | above[:, :, 0].any(1)
+               | above[:, :, -1].any(1))
+    reason[touches] = T.TOUCHES_EDGE
+    reason[(body < opts.min_contrast) | (body < opts.min_snr * noise)] = T.LOW_CONTRAST
+    return a, b, r, reason
+
+
+def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 36,
+                   span: float = 2.0, step: float = 0.5
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Refit the silhouette on radial profiles (per-ray half-way level, or steepest point).
+
+    A fixed level lands inside the edge where the body is dimmer (a lamp shaded by the wall
+    darkens one side). Rays from the first circle's centre (a, b), radii r - span .. r + span
+    [px], bilinear samples of H; each ray is crossed half-way between its own inside and
+    outside levels (``EDGE_MODE = "local"``, used: as little jitter as a fixed level, less bias)
+    or at the parabolic peak of -dI/drho (``"gradient"``: height-independent too, but 3x the
+    jitter). Returns a, b, r, rms, count as _robust_circle.
+    """
+    K, h, w = H.shape
+    ang = np.arange(n_rays) * (2 * np.pi / n_rays)
+    rho = np.arange(-span, span + step / 2, step)                       # (P,)
+    ca, sa = np.cos(ang), np.sin(ang)
+    good = np.isfinite(a) & np.isfinite(r)
+    a0, b0, r0 = np.where(good, a, (w - 1) / 2), np.where(good, b, (h - 1) / 2), \
+        np.where(good, r, 1.0)
+    rr = r0[:, None, None] + rho[None, None, :]                          # (K, 1, P)
+    X = a0[:, None, None] + ca[None, :, None] * rr                       # (K, R, P)
+    Y = b0[:, None, None] + sa[None, :, None] * rr
+    X = np.clip(X, 0, w - 1.001)
+    Y = np.clip(Y, 0, h - 1.001)
+    ix, iy = np.floor(X).astype(np.int64), np.floor(Y).astype(np.int64)
+    fx, fy = X - ix, Y - iy
+    kk = np.arange(K)[:, None, None]
+    v = ((1 - fy) * ((1 - fx) * H[kk, iy, ix] + fx * H[kk, iy, ix + 1])
+         + fy * ((1 - fx) * H[kk, iy + 1, ix] + fx * H[kk, iy + 1, ix + 1]))
+    if EDGE_MODE == "gradient":
+        # -dI/drho over 1 px (4 steps): a shorter difference made the peak twice as noisy
+        g = (v[:, :, :-4] + v[:, :, 1:-3]) - (v[:, :, 3:-1] + v[:, :, 4:])
+        j = np.clip(g.argmax(axis=2), 1, g.shape[2] - 2)
+        gm, g0, gp = (np.take_along_axis(g, (j + d)[:, :, None], 2)[:, :, 0]
+                      for d in (-1, 0, 1))
+        den = gm - 2 * g0 + gp
+        frac = np.where(den < 0, 0.5 * (gm - gp) / np.where(den < 0, den, -1.0), 0.0)
+        edge = r0[:, None] + rho[2:-2][j] + np.clip(frac, -1, 1) * step  # (K, R) radius [px]
+    else:
+        # half-way between this ray's own inside (limb) and outside levels
+        lev = 0.5 * (v[:, :, :3].mean(axis=2) + v[:, :, -3:].mean(axis=2))
+        below = v < lev[:, :, None]
+        j = np.clip(np.argmax(below, axis=2), 1, v.shape[2] - 1)       # first sample below
+        v1 = np.take_along_axis(v, j[:, :, None], 2)[:, :, 0]
+        v0 = np.take_along_axis(v, (j - 1)[:, :, None], 2)[:, :, 0]
+        frac = np.clip((v0 - lev) / np.where(v0 - v1 > 0, v0 - v1, 1.0), 0.0, 1.0)
+        edge = r0[:, None] + rho[j - 1] + frac * step
+    xs = (a0[:, None] + ca * edge).ravel()
+    ys = (b0[:, None] + sa * edge).ravel()
+    kidx = np.repeat(np.arange(K), n_rays)
+    out = W.robust_circle(kidx, xs, ys, K)
+    for arr in out[:3]:
+        arr[~good] = np.nan
+    return out
+
+
+def _ball_window(radius_px: float) -> int:
+    """Window side for the ball [px]: the ball plus a ring of background for the plane."""
+    return int(2 * np.ceil(radius_px) + 10)
+
+
+def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
+               radius_px: float | None = None, window: int = T.DEFAULT_WINDOW,
+               options: "T.TrackingOptions | None" = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ball centre per frame under two reflections: x, y [px], radius/separation, reason."""
+    if ball_method not in BALL_METHODS:
+        raise ParameterError("--ball-method", ball_method, f"one of {', '.join(BALL_METHODS)}")
+    opts = options or T.TrackingOptions()
+    seed = np.asarray(seed, dtype=float).reshape(1, 2)
+    frames, seed, window = T._check_inputs(frames, seed, window, "moments")
+    xs, ys, reason0 = T._seeded_moments(frames, seed, window, False, opts)
+    if radius_px is None:
+        radius_px = _estimate_radius(frames[0], seed[0])
+    ws = _ball_window(radius_px)
+    n, hgt, wid = frames.shape
+    half = ws // 2
+    geo = W.WindowGeometry.make(ws)
+    X = np.full(n, np.nan)
+    Y = np.full(n, np.nan)
+    R = np.full(n, np.nan)
+    reason = reason0[:, 0].copy()
+    # two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
+    # second pass re-centres the window on the first estimate
+    cx, cy = xs[:, 0], ys[:, 0]
+    for final in (False, True):
+        for start in range(0, n, T.BATCH_FRAMES):
+            stop = min(n, start + T.BATCH_FRAMES)
+            x0 = np.rint(cx[start:stop]).astype(np.int64) - half
+            y0 = np.rint(cy[start:stop]).astype(np.int64) - half
+            inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
+            x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
+            G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
+                          ws).astype(np.float32)
+            if ball_method == "pair":
+                a, b, r, code = refine_pair(G, geo, opts)
+            else:
+                # the radial-profile refit only in the final pass (the first one re-centres)
+                a, b, r, code = refine_outline(G, geo, opts, radius_px, edges=final)
+            code[~inside] = T.OUTSIDE
+            code = np.where(code != T.OK, code, reason0[start:stop, 0])
+            X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
+            reason[start:stop] = code
+        ok = reason == T.OK
+        cx = np.where(ok, X, xs[:, 0])
+        cy = np.where(ok, Y, ys[:, 0])
+    return X, Y, R, reason
+
+
+def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) -> float:
+    """The ball's image radius [px] from frame 0 (outline fit in a generous window)."""
+    for ws in (24, 20, 16):
+        x0, y0 = int(round(seed[0])) - ws // 2, int(round(seed[1])) - ws // 2
+        if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
+            continue
+        G = frame[None, y0:y0 + ws, x0:x0 + ws].astype(np.float32)
+        geo = W.WindowGeometry.make(ws)
+        for guess in (default, 4.0, 6.0):
+            a, b, r, code = refine_outline(G, geo, T.TrackingOptions(), guess)
+            if code[0] == T.OK:
+                return float(r[0])
+    return default
+
+
+def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
+                           ball_method: str = DEFAULT_BALL_METHOD, method: str = T.DEFAULT_METHOD,
+                           window: int = T.DEFAULT_WINDOW, dark: bool = False,
+                           radius_px: float | None = None,
+                           options: "T.TrackingOptions | None" = None) -> "T.Tracks":
+    """Track ABU centre and CD marker (``method``) and the ball under two reflections.
+
+    Returns :class:`tracking.Tracks` with the three markers in the usual order; the ball's
+    ``radius`` column holds the outline radius (``outline``) or the reflections' separation
+    (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``.
+    """
+    if dark:
+        raise ParameterError("--dark-markers", True, "bright markers with --ball-reflections 2")
+    seeds = np.asarray(seeds, dtype=float)
+    if seeds.shape != (3, 2):
+        raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
+    opts = options or T.TrackingOptions()
+    tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
+    X, Y, R, reason = track_ball(frames, seeds[2], ball_method=ball_method,
+                                 radius_px=radius_px, window=window, options=opts)
+    Xa = np.column_stack([tr.x, X])
+    Ya = np.column_stack([tr.y, Y])
+    Ra = np.column_stack([tr.radius, R])
+    reasons = np.column_stack([tr.reason, reason]).astype(np.uint8)
+    T._post_checks(Xa, Ya, Ra, reasons, window, opts, check_radius=False)
+    lost = reasons != T.OK
+    nan = np.nan
+    return T.Tracks(x=np.where(lost, nan, Xa), y=np.where(lost, nan, Ya), lost=lost,
+                    reason=reasons, radius=np.where(lost, nan, Ra),
+                    method=f"{method}+{ball_method}", window=window, dark=False, options=opts)
+
+
+def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
+                  window: int = T.DEFAULT_WINDOW, dark: bool = False, progress: bool = False,
+                  ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD
+                  ) -> "T.Tracks":
+    """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
+    = 1 (the default), :func:`track_with_reflections` for 2."""
+    if ball_reflections not in (1, 2):
+        raise ParameterError("--ball-reflections", ball_reflections, "1 or 2")
+    if ball_reflections == 1:
+        return T.track_recording(frames, seeds, method=method, window=window, dark=dark,
+                                 progress=progress)
+    return track_with_reflections(frames, seeds, ball_method=ball_method, method=method,
+                                  window=window, dark=dark)

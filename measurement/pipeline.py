@@ -1,0 +1,338 @@
+"""The measurement chain as one pipeline of typed stages: recording -> marker tracks -> interval.
+
+* :func:`track_recording`: read a recording, find (or take) the three markers in frame 0, track
+  them, fill short gaps -> :class:`MarkerTracks`;
+* :func:`read_tracks`: the same from a tracks CSV (``abu track``'s or anyone's);
+* :func:`measure_tracks`: undistort (with a calibrated :class:`~measurement.imaging.camera.Camera`),
+  analyse -> :class:`MeasureResult` (the kinematics table and the summary of ``summary.json``);
+* :func:`measure_recording`: both, the whole of ``abu measure``;
+* :func:`write_measurement`: ``tracks.csv``, ``kinematics.csv``, the figures and ``summary.json``.
+
+The command line and :mod:`abu.api` call these; nothing here knows about options or argv.
+SI units inside (s, rad, m); positions in pixels (x = column, y = row); frame rates in
+frames/s (``fps_hz``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from abu_model.atomic_io import atomic_write_text
+from abu_model.errors import ParameterError
+from abu_model.json_text import dumps
+
+from measurement.imaging import tracks_io
+from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
+
+#: Frame rate assumed when neither the recording nor the user gives one [frames/s] (the report's).
+DEFAULT_FPS = 4500.0
+#: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
+SUMMARY_KIND = "abu-measure-summary"
+SUMMARY_VERSION = 1
+#: The report's ABU: radius of the ball centre's path and ball diameter [m].
+DEFAULT_L_M = 1.15e-2
+DEFAULT_D_M = 3.0e-3
+ROLES = ("center", "cd", "ball")
+
+
+@dataclass(frozen=True)
+class TrackingSettings:
+    """How the markers are found and tracked (see :mod:`measurement.imaging.tracking`).
+
+    Attributes:
+        seeds_px: (3, 2) marker positions in frame 0 [px], in the order ABU centre, CD marker,
+            ball; None: found automatically (:func:`measurement.imaging.markers.find_markers`).
+        dark_markers: markers darker than their surroundings.
+        method: centre-finding method (``isocontour``, ``report``, ``moments``).
+        window_px: tracking window [px].
+        ball_reflections: 1, or 2 for the report's two-spot lighting.
+        ball_method: with two reflections, ``outline`` or ``pair``.
+        progress: progress bar on stderr while tracking.
+    """
+
+    seeds_px: np.ndarray | None = None
+    dark_markers: bool = False
+    method: str = "isocontour"
+    window_px: int = 30
+    ball_reflections: int = 1
+    ball_method: str = "outline"
+    progress: bool = False
+
+
+@dataclass
+class MarkerTracks:
+    """Marker tracks of one record, lost frames filled (``lost`` says which were).
+
+    Attributes:
+        time_s: (N,) frame times [s].
+        x_px, y_px: (N, 3) positions [px] of the ABU centre, CD marker and ball.
+        lost: (N, 3) True where the tracker lost the marker (filled by interpolation).
+        source: where the record came from (file and format).
+        info: what ``tracking.json`` / ``summary.json['input']`` records (seeds, method,
+            frame rate, lost frames); ``{"source": ..., "tracks_csv": True}`` for a CSV.
+        frame_size_px: (width, height) of the frames [px]; None for a tracks CSV.
+    """
+
+    time_s: np.ndarray
+    x_px: np.ndarray
+    y_px: np.ndarray
+    lost: np.ndarray
+    source: str
+    info: dict[str, Any]
+    frame_size_px: tuple[int, int] | None = None
+
+    def csv_text(self) -> str:
+        """The ``tracks.csv`` text (time, angles, positions, lost bit mask)."""
+        theta, beta = tracks_io.angles_from_pixels(self.x_px, self.y_px)
+        return tracks_io.format_tracks_csv(self.time_s, theta, beta, self.x_px, self.y_px,
+                                           self.lost)
+
+
+@dataclass
+class MeasureResult:
+    """What ``abu measure`` finds for one record.
+
+    Attributes:
+        tracks: the marker tracks measured (filled, before any undistortion).
+        table: time series of the analysis, column name (with unit) -> (N,) array
+            (``kinematics.csv``).
+        summary: the JSON-ready summary (``summary.json``; docs/measurement-analysis.md).
+    """
+
+    tracks: MarkerTracks
+    table: dict[str, np.ndarray]
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def mu_low(self) -> float | None:
+        """Lower end of the confidence interval on mu [-] (None: no lower bound)."""
+        return self.summary.get("mu_low")
+
+    @property
+    def mu_high(self) -> float | None:
+        """Upper end of the confidence interval on mu [-] (None: no upper bound)."""
+        return self.summary.get("mu_high")
+
+    @property
+    def status(self) -> str | None:
+        """``ok`` or why the interval is open or wide."""
+        return self.summary.get("status")
+
+
+# ------------------------------------------------------------------------------ tracking
+
+def _seeds(frame0: np.ndarray, settings: TrackingSettings,
+           log: Callable[[str], None] | None) -> tuple[np.ndarray, str]:
+    """The three seeds [px] and how they were obtained."""
+    from measurement.imaging.markers import find_markers, format_seeds
+
+    if settings.seeds_px is not None:
+        return np.asarray(settings.seeds_px, dtype=float), "given by --seeds"
+    seeds, roles = find_markers(frame0, dark=settings.dark_markers,
+                                ball_reflections=settings.ball_reflections)
+    if log is not None:
+        log("markers found in frame 0 (x, y px): " + ", ".join(
+            f"{role} ({sx:.2f}, {sy:.2f})" for role, (sx, sy) in zip(roles, seeds)))
+        log(f"  reuse or correct with --seeds '{format_seeds(seeds)}'")
+    return seeds, "found in frame 0"
+
+
+def _check_seeds_inside(seeds: np.ndarray, width: int, height: int) -> None:
+    from measurement.imaging.markers import format_seeds
+
+    for i, (sx, sy) in enumerate(seeds):
+        if not (0 <= sx <= width - 1 and 0 <= sy <= height - 1):
+            raise ParameterError("seeds", format_seeds(seeds),
+                                 f"positions inside the {width}x{height} px frame (position "
+                                 f"{i + 1} is outside)")
+
+
+def track_recording(path: str | Path, *, fps_hz: float = DEFAULT_FPS,
+                    settings: TrackingSettings = TrackingSettings(),
+                    check: Callable[[int], None] | None = None,
+                    log: Callable[[str], None] | None = None) -> MarkerTracks:
+    """Read the recording at ``path``, seed and track its three markers, fill short gaps.
+
+    Args:
+        fps_hz: frame rate [frames/s].
+        check: called with the number of frames after reading, before tracking (input checks).
+        log: receives progress messages (the markers found), or None.
+
+    Raises:
+        AbuError: unreadable recording, seeds outside the frame, a marker lost for too long
+            (the message names the recording and the reasons).
+    """
+    from measurement.imaging.frames_io import read_recording
+    from measurement.imaging.markers import format_seeds
+    from measurement.imaging.reflections import track_markers
+
+    rec = read_recording(path)
+    frames = rec.frames
+    if check is not None:
+        check(len(rec))
+    seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
+    h, w = frames.shape[1:]
+    _check_seeds_inside(seeds, w, h)
+    tracks = track_markers(frames, seeds, method=settings.method, window=settings.window_px,
+                           dark=settings.dark_markers, progress=settings.progress,
+                           ball_reflections=settings.ball_reflections,
+                           ball_method=settings.ball_method)
+    time = np.arange(tracks.n_frames) / fps_hz
+    lost = np.asarray(tracks.lost, dtype=bool)
+    try:
+        x = tracks_io.fill_lost(time, tracks.x, lost)
+        y = tracks_io.fill_lost(time, tracks.y, lost)
+    except tracks_io.LostMarkerError as exc:
+        # Name the frame as the recording knows it (file name for a folder of frames).
+        hint = ("; if the ball shows two reflections, use --ball-reflections 2"
+                if settings.ball_reflections == 1 and tracks.lost[:, 2].any() else "")
+        raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: "
+                                        f"{tracks.lost_summary()}{hint}") from None
+    info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
+            "roles": list(ROLES), "method": tracks.method, "window_px": tracks.window,
+            "fps_hz": fps_hz, "frames": int(time.size),
+            "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
+            "lost_reasons": tracks.lost_summary()}
+    return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
+
+
+def read_tracks(path: str | Path, *, fps_hz: float | None = None) -> MarkerTracks:
+    """Marker tracks from a tracks CSV (lost markers filled as after tracking).
+
+    Args:
+        fps_hz: if given, must match the CSV's time column [frames/s] (a check, not a
+            resampling).
+    """
+    table = tracks_io.read_tracks_csv(path)
+    if fps_hz is not None:
+        dt = float(np.median(np.diff(table.time)))
+        if abs(dt * fps_hz - 1.0) > 1e-3:
+            raise ParameterError("fps", fps_hz, f"the frame rate of the tracks file "
+                                 f"{path} ({1.0 / dt:.6g} frames/s from its time "
+                                 "column), or leave --fps out")
+    return MarkerTracks(table.time, table.x, table.y, table.lost, str(path),
+                        {"source": str(path), "tracks_csv": True})
+
+
+def fill_tracks(tracks: MarkerTracks) -> MarkerTracks:
+    """``tracks`` with lost positions interpolated (short gaps; long ones refused)."""
+    x = tracks_io.fill_lost(tracks.time_s, tracks.x_px, tracks.lost)
+    y = tracks_io.fill_lost(tracks.time_s, tracks.y_px, tracks.lost)
+    return replace(tracks, x_px=x, y_px=y)
+
+
+# ------------------------------------------------------------------------------ analysis
+
+def check_record_length(time_s: np.ndarray, source: str, options: AnalysisOptions) -> None:
+    """Frame rate, record length and trim against what the estimators need."""
+    check_sampling(time_s, source, fps_option="--fps", sg_window_s=options.sg_window_s,
+                   polyorder=options.sg_polyorder, estimator=options.estimator,
+                   trim_s=options.trim_s)
+
+
+def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
+                   options: AnalysisOptions = AnalysisOptions(), camera=None,
+                   camera_path: str | None = None,
+                   drive: dict[str, Any] | None = None) -> MeasureResult:
+    """Analyse filled marker tracks: the interval on mu and everything ``summary.json`` holds.
+
+    Args:
+        l_m, d_m: radius of the ball centre's path and ball diameter [m].
+        camera: a :class:`measurement.imaging.camera.Camera` (``abu calibrate-camera``): the
+            positions are undistorted and theta's harmonic prior comes from it; None: the
+            family's lens prior.
+        camera_path: the camera file's name, for messages and the summary.
+        drive: the ``drive.json`` object of the setup (recorded for ``abu next``).
+    """
+    source = tracks.source
+    check_motion_and_roles(tracks.time_s, tracks.x_px, tracks.y_px, source)
+    x, y, camera_info = tracks.x_px, tracks.y_px, None
+    if camera is not None:
+        from measurement.imaging.camera import undistort_tracks
+        x, y, prior, camera_info = undistort_tracks(camera_path or "camera", camera, x, y,
+                                                     tracks.frame_size_px)
+        if options.inference is not None:
+            options = replace(options, inference=replace(
+                options.inference, theta_harmonic_rad=float(prior)))
+    table, summary = analyse_tracks(tracks.time_s, x, y, l=l_m, d=d_m, lost=tracks.lost,
+                                    options=options)
+    summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracks.info,
+               **summary, **({"camera": camera_info} if camera_info else {})}
+    if drive is not None:
+        summary["drive"] = drive
+    return MeasureResult(tracks, table, summary)
+
+
+def measure_recording(path: str | Path, *, fps_hz: float | None = None,
+                      tracking: TrackingSettings = TrackingSettings(),
+                      l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
+                      options: AnalysisOptions = AnalysisOptions(), camera=None,
+                      camera_path: str | None = None, drive: dict[str, Any] | None = None,
+                      log: Callable[[str], None] | None = None) -> MeasureResult:
+    """Track and analyse a recording (the whole of ``abu measure INPUT``).
+
+    Args:
+        fps_hz: frame rate [frames/s]; None: :data:`DEFAULT_FPS`.
+        Others: as :func:`track_recording` and :func:`measure_tracks`.
+    """
+    fps = DEFAULT_FPS if fps_hz is None else fps_hz
+    tracks = track_recording(path, fps_hz=fps, settings=tracking, log=log,
+                             check=lambda n: check_record_length(np.arange(n) / fps, "--fps",
+                                                                 options))
+    return measure_tracks(tracks, l_m=l_m, d_m=d_m, options=options, camera=camera,
+                          camera_path=camera_path, drive=drive)
+
+
+def measure_tracks_file(path: str | Path, *, fps_hz: float | None = None,
+                        l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
+                        options: AnalysisOptions = AnalysisOptions(), camera=None,
+                        camera_path: str | None = None,
+                        drive: dict[str, Any] | None = None) -> MeasureResult:
+    """Analyse a tracks CSV (the whole of ``abu measure --tracks INPUT``)."""
+    raw = read_tracks(path, fps_hz=fps_hz)
+    check_record_length(raw.time_s, str(path), options)
+    return measure_tracks(fill_tracks(raw), l_m=l_m, d_m=d_m, options=options, camera=camera,
+                          camera_path=camera_path, drive=drive)
+
+
+# ------------------------------------------------------------------------------ writing
+
+def kinematics_csv_text(table: dict[str, np.ndarray]) -> str:
+    """CSV text of a table of equal-length columns (names carry the units)."""
+    names = list(table)
+    # Plain CSV (no comment line): units are in the column names (_s, _rad, _rad_s, _rad_s2);
+    # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball;
+    # non-finite values are empty cells.
+    return tracks_io.table_csv_text(names, [np.asarray(table[n]) for n in names])
+
+
+def write_measurement(result: MeasureResult, out_dir: str | Path, *,
+                      plots: bool = True) -> list[Path]:
+    """Write ``tracks.csv``, ``kinematics.csv``, the figures and ``summary.json`` into
+    ``out_dir`` (an existing folder; each file atomically, summary.json last)."""
+    out = Path(out_dir)
+    t = result.tracks
+    theta, beta = result.table["theta_rad"], result.table["beta_rad"]
+    tracks_text = tracks_io.format_tracks_csv(t.time_s, theta, beta, t.x_px, t.y_px, t.lost)
+    table_text = kinematics_csv_text(result.table)
+    summary_text = dumps(result.summary)
+    written = [out / "tracks.csv", out / "kinematics.csv"]
+    atomic_write_text(written[0], tracks_text)
+    atomic_write_text(written[1], table_text)
+    if plots:
+        from measurement.report.plots import plot_analysis  # matplotlib only when plotting
+        written += plot_analysis(result.table, result.summary, out)
+    atomic_write_text(out / "summary.json", summary_text)
+    return written + [out / "summary.json"]
+
+
+def write_tracks(tracks: MarkerTracks, out_dir: str | Path) -> list[Path]:
+    """Write ``tracks.csv`` and ``tracking.json`` (``abu track``) into ``out_dir``."""
+    out = Path(out_dir)
+    atomic_write_text(out / "tracks.csv", tracks.csv_text())
+    atomic_write_text(out / "tracking.json", dumps(tracks.info))
+    return [out / "tracks.csv", out / "tracking.json"]

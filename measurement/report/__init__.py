@@ -1,0 +1,1 @@
+"""Report: the measurement's summary text, JSON, figures, and several records combined."""
