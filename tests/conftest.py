@@ -22,3 +22,12 @@ def fmu_dir(tmp_path_factory) -> dict[str, Path]:
     from fmus.build import build_fmus
 
     return build_fmus(tmp_path_factory.mktemp("fmus"))
+
+
+@pytest.fixture(scope="session")
+def native_fmu_dir(tmp_path_factory) -> dict[str, Path]:
+    """The native (Python-free) AbuBall, SpeedController and Staircase FMUs, built once per
+    session (linux64 only; the win64 test builds its own)."""
+    from fmus.native_build import build_native_fmus
+
+    return build_native_fmus(tmp_path_factory.mktemp("native_fmus"), win64=False)

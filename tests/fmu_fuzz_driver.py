@@ -47,6 +47,11 @@ def load(name: str, fmu_path: str, root: str):
     return fmu, md, unzipdir
 
 
+#: Set by tests/native_fuzz_driver.py: how to make an FMU without the Python runtime fail
+#: fatally, called as NATIVE_FAULT(fmu, rng) in place of the runtime fault below.
+NATIVE_FAULT = None
+
+
 class Outcome(Exception):
     """A broken promise found inside a child."""
 
@@ -130,6 +135,8 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
                            b'"last_successful_time": 0.0, "slave": {"m": -1}}'])
 
     def inject_fault():
+        if NATIVE_FAULT is not None:  # an FMU without the Python runtime (native build)
+            return NATIVE_FAULT(fmu, rng)
         # A failure of the runtime itself (a malformed answer): the C layer must latch fatal.
         import sys
         with open(os.path.join(unzipdir, "resources", "slavemodule.txt")) as f:
