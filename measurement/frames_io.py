@@ -7,6 +7,7 @@ Accepted inputs (``read_recording``):
   (e.g. a twin's output folder) is read as that stack;
 * a multi-page TIFF (tifffile);
 * a ``.npy`` stack (N, H, W) uint8, memory-mapped (nothing is read until used);
+* a Photron MRAW (its .cih, .cihx or .mraw) or a Phantom .cine file (:mod:`camera_files`);
 * any video file OpenCV can decode (converted to grayscale; lossy codecs alter the pixels).
 
 Frames may be 8- or 16-bit, grey or colour (RGB / BGR, alpha ignored): 16-bit and colour frames
@@ -37,7 +38,7 @@ from .recording_checks import (MAX_FRAMES, MAX_PIXELS, check_size, check_tiff_co
 FRAME_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: Endings tried as video files (anything else unknown is tried as video too, last).
-VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv", ".cine")
+VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv")
 
 
 class RecordingError(AbuError):
@@ -53,11 +54,19 @@ class Recording:
         source: human-readable description of where it came from (path and format).
         frame_names: for a folder of frames, the file name of each frame (for messages);
             None for stacks and videos.
+        fps_hz, fps_source: frame rate the file states [1/s] and where it was read (camera
+            file header, video container); None when the file gives none.
+        bit_depth: bits per sample in a camera file (before conversion to 8 bits), else None.
+        first_frame_time_s: time of the first frame after the camera's trigger [s], if known.
     """
 
     frames: np.ndarray
     source: str
     frame_names: list[str] | None = field(default=None)
+    fps_hz: float | None = None
+    fps_source: str | None = None
+    bit_depth: int | None = None
+    first_frame_time_s: float | None = None
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])
@@ -127,6 +136,13 @@ def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
         return _read_npy(p, mmap=mmap)
     if suffix in TIFF_SUFFIXES:
         return _read_tiff(p, mmap=mmap)
+    if suffix in (".cih", ".cihx", ".mraw", ".cine"):
+        from .camera_files import read_camera_file
+        frames, info = read_camera_file(p, mmap=mmap)
+        frames, note = _convert(frames)
+        return Recording(check_stack(np.ascontiguousarray(frames), info.source),
+                         info.source + note, fps_hz=info.fps_hz, fps_source=info.fps_source,
+                         bit_depth=info.bit_depth, first_frame_time_s=info.first_frame_time_s)
     if suffix in (".png", ".bmp"):
         frame, colour = _read_single_frame(p, 0, None)
         frame, note = _convert(frame[np.newaxis], was_colour=colour)
@@ -379,6 +395,7 @@ def _read_video(p: Path) -> Recording:
             raise RecordingError(
                 f"cannot read '{p}': not a folder of frames, a multi-page TIFF, a .npy stack or a "
                 "video file OpenCV can decode")
+        fps = cap.get(cv2.CAP_PROP_FPS)
         frames = []
         while True:
             ok, img = cap.read()
@@ -397,7 +414,10 @@ def _read_video(p: Path) -> Recording:
         cap.release()
     if not frames:
         raise RecordingError(f"video '{p}' holds no readable frames")
-    return Recording(np.stack(frames), f"video {p} (converted to grayscale)")
+    known = bool(np.isfinite(fps) and fps > 0)
+    return Recording(np.stack(frames), f"video {p} (converted to grayscale)",
+                     fps_hz=float(fps) if known else None,
+                     fps_source="video container" if known else None)
 
 
 def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray) -> Path:
