@@ -7,6 +7,7 @@ Accepted inputs (``read_recording``):
   (e.g. a twin's output folder) is read as that stack;
 * a multi-page TIFF (tifffile);
 * a ``.npy`` stack (N, H, W) uint8, memory-mapped (nothing is read until used);
+* a Photron MRAW (its .cih, .cihx or .mraw) or a Phantom .cine file (:mod:`camera_files`);
 * any video file OpenCV can decode (converted to grayscale; lossy codecs alter the pixels).
 
 Frames may be 8- or 16-bit, grey or colour (RGB / BGR, alpha ignored): 16-bit and colour frames
@@ -21,80 +22,18 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from abu_model.atomic_io import atomic_open
 
 from measurement.imaging import sample_formats as fmt
 from measurement.imaging.recording_checks import (  # noqa: F401  (re-exported names)
     MAX_FRAMES, MAX_PIXELS, RecordingError, check_size, check_tiff_complete, tifffile_messages)
-
-#: File name endings read as single frames in a folder.
-FRAME_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
-TIFF_SUFFIXES = (".tif", ".tiff")
-#: Endings tried as video files (anything else unknown is tried as video too, last).
-VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv", ".cine")
-
-
-@dataclass
-class Recording:
-    """A recording in memory (or memory-mapped).
-
-    Attributes:
-        frames: (N, H, W) uint8 array, C order; frame index first. Pixel (row, col) = (y, x).
-        source: human-readable description of where it came from (path and format).
-        frame_names: for a folder of frames, the file name of each frame (for messages);
-            None for stacks and videos.
-    """
-
-    frames: np.ndarray
-    source: str
-    frame_names: list[str] | None = field(default=None)
-
-    def __len__(self) -> int:
-        return int(self.frames.shape[0])
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        """(N, H, W): number of frames, height and width [px]."""
-        return tuple(int(s) for s in self.frames.shape)  # type: ignore[return-value]
-
-    def frame_label(self, index: int) -> str:
-        """``frame <index>`` plus its file name when known, for error messages."""
-        if self.frame_names is not None and 0 <= index < len(self.frame_names):
-            return f"frame {index} ({self.frame_names[index]})"
-        return f"frame {index}"
-
-
-def natural_key(name: str) -> list:
-    """Sort key that orders embedded numbers by value: ``img2`` < ``img10``."""
-    return [int(tok) if tok.isdigit() else tok.lower() for tok in re.split(r"(\d+)", name)]
-
-
-def check_stack(frames: np.ndarray, where: str) -> np.ndarray:
-    """Check ``frames`` is an (N, H, W) uint8 stack with N >= 1; return it (2-D -> 1 frame).
-
-    Raises:
-        RecordingError: naming ``where`` and what was expected.
-    """
-    if not isinstance(frames, np.ndarray):
-        raise RecordingError(f"{where}: expected a numpy array of frames, got {type(frames).__name__}")
-    if frames.dtype != np.uint8:
-        raise RecordingError(f"{where}: frames have dtype {frames.dtype}; expected 8-bit "
-                             "grayscale (uint8)")
-    if frames.ndim == 2:
-        frames = frames[np.newaxis]
-    if frames.ndim != 3:
-        hint = " (colour frames? convert to 8-bit grayscale)" if frames.ndim == 4 else ""
-        raise RecordingError(f"{where}: frames have shape {frames.shape}; expected (N, H, W)"
-                             f"{hint}")
-    if frames.shape[0] < 1 or frames.shape[1] < 1 or frames.shape[2] < 1:
-        raise RecordingError(f"{where}: empty recording, shape {frames.shape}")
-    return frames
-
+from measurement.imaging.recording import (  # noqa: F401  (re-exported names)
+    FRAME_SUFFIXES, TIFF_SUFFIXES, VIDEO_SUFFIXES, Recording, check_stack, natural_key)
+from measurement.imaging.frames_write import (  # noqa: F401  (re-exported names)
+    write_frame_folder, write_multipage_tiff, write_npy)
 
 def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
     """Read a recording (folder of frames, multi-page TIFF, ``.npy`` stack or video).
@@ -122,6 +61,13 @@ def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
         return _read_npy(p, mmap=mmap)
     if suffix in TIFF_SUFFIXES:
         return _read_tiff(p, mmap=mmap)
+    if suffix in (".cih", ".cihx", ".mraw", ".cine"):
+        from measurement.imaging.camera_files import read_camera_file
+        frames, info = read_camera_file(p, mmap=mmap)
+        frames, note = _convert(frames)
+        return Recording(check_stack(np.ascontiguousarray(frames), info.source),
+                         info.source + note, fps_hz=info.fps_hz, fps_source=info.fps_source,
+                         bit_depth=info.bit_depth, first_frame_time_s=info.first_frame_time_s)
     if suffix in (".png", ".bmp"):
         frame, colour = _read_single_frame(p, 0, None)
         frame, note = _convert(frame[np.newaxis], was_colour=colour)
@@ -374,6 +320,7 @@ def _read_video(p: Path) -> Recording:
             raise RecordingError(
                 f"cannot read '{p}': not a folder of frames, a multi-page TIFF, a .npy stack or a "
                 "video file OpenCV can decode")
+        fps = cap.get(cv2.CAP_PROP_FPS)
         frames = []
         while True:
             ok, img = cap.read()
@@ -392,50 +339,7 @@ def _read_video(p: Path) -> Recording:
         cap.release()
     if not frames:
         raise RecordingError(f"video '{p}' holds no readable frames")
-    return Recording(np.stack(frames), f"video {p} (converted to grayscale)")
-
-
-def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray) -> Path:
-    """Write an (N, H, W) uint8 stack as one multi-page grayscale TIFF, atomically.
-
-    Returns the path written. Raises :class:`RecordingError` if ``frames`` is not a stack.
-    """
-    import tifffile
-
-    target = Path(path)
-    frames = check_stack(np.asarray(frames), f"frames for '{target}'")
-    with atomic_open(target, "wb") as handle:
-        tifffile.imwrite(handle, frames, photometric="minisblack", contiguous=True)
-    return target
-
-
-def write_npy(path: str | os.PathLike, frames: np.ndarray) -> Path:
-    """Write an (N, H, W) uint8 stack as a ``.npy`` file, atomically. Returns the path."""
-    target = Path(path)
-    frames = check_stack(np.asarray(frames), f"frames for '{target}'")
-    with atomic_open(target, "wb") as handle:
-        np.save(handle, np.ascontiguousarray(frames), allow_pickle=False)
-    return target
-
-
-def write_frame_folder(folder: str | os.PathLike, frames: np.ndarray, *, suffix: str = ".png",
-                       prefix: str = "frame") -> Path:
-    """Write each frame as ``<prefix><index>.png`` (or .bmp/.tif) in ``folder``, atomically per file.
-
-    Names carry no zero padding on purpose: the reader's natural order must handle them.
-    """
-    import cv2
-
-    suffix = suffix.lower()
-    if suffix not in FRAME_SUFFIXES:
-        raise RecordingError(f"frame file type '{suffix}': expected one of {FRAME_SUFFIXES}")
-    folder = Path(folder)
-    frames = check_stack(np.asarray(frames), f"frames for '{folder}'")
-    folder.mkdir(parents=True, exist_ok=True)
-    for i, img in enumerate(frames):
-        ok, buf = cv2.imencode(suffix, img)
-        if not ok:
-            raise RecordingError(f"cannot encode frame {i} as {suffix}")
-        with atomic_open(folder / f"{prefix}{i}{suffix}", "wb") as handle:
-            handle.write(buf.tobytes())
-    return folder
+    known = bool(np.isfinite(fps) and fps > 0)
+    return Recording(np.stack(frames), f"video {p} (converted to grayscale)",
+                     fps_hz=float(fps) if known else None,
+                     fps_source="video container" if known else None)
