@@ -35,7 +35,7 @@ from abu_model.params import BallParams, PlantParams
 
 from measurement.inference.analysis import AnalysisOptions
 from measurement.pipeline import (DEFAULT_D_M, DEFAULT_L_M, MarkerTracks,  # noqa: F401 (API)
-                                  MeasureResult, TrackingSettings, measure_recording,
+                                  MeasureResult, TrackingSettings, summary_field, measure_recording,
                                   measure_tracks_file, track_recording, write_measurement,
                                   write_tracks)
 
@@ -68,20 +68,17 @@ class SimulationResult:
     summary: dict[str, Any]
     result: Any
 
-    @property
-    def mu_low(self) -> float | None:
-        """Largest mu_req while stuck [-]; None when the first setpoint step made it slip."""
-        return self.summary.get("mu_low")
-
-    @property
-    def mu_high(self) -> float | None:
-        """mu_req just after the slip [-]; None when the ball never slipped."""
-        return self.summary.get("mu_high")
-
-    @property
-    def t_slip_s(self) -> float | None:
-        """First slip instant [s] (None: no slip)."""
-        return self.summary.get("t_slip")
+    mu = summary_field("mu", "true (simulated) static friction coefficient [-]")
+    mu_low = summary_field("mu_low", "largest mu_req while stuck [-]; None when the first "
+                                      "setpoint step made the ball slip")
+    mu_high = summary_field("mu_high", "mu_req just after the slip [-]; None: no slip")
+    t_slip_s = summary_field("t_slip", "first slip instant [s] (None: no slip)")
+    omega_slip_rad_s = summary_field("omega_slip", "ABU speed at the slip [rad/s]")
+    alpha_slip_rad_s2 = summary_field("alpha_slip", "ABU acceleration at the slip [rad/s^2]")
+    slips = summary_field("slips", "whether the ball slipped in the run")
+    brackets_mu = summary_field("brackets_mu", "whether mu_low <= mu < mu_high")
+    switches = summary_field("switches", "every stick/slip switch (time [s], from, to)")
+    message = summary_field("message", "what the bounds mean for this run")
 
     def write(self, out_dir: str | Path) -> list[Path]:
         """``result.csv``, ``summary.json`` and the plots into ``out_dir`` (created)."""

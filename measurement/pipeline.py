@@ -92,6 +92,11 @@ class MarkerTracks:
                                            self.lost)
 
 
+def summary_field(key: str, doc: str) -> property:
+    """A read-only attribute for the summary's field ``key`` (None where it is absent)."""
+    return property(lambda self: self.summary.get(key), doc=doc)
+
+
 @dataclass
 class MeasureResult:
     """What ``abu measure`` finds for one record.
@@ -107,20 +112,23 @@ class MeasureResult:
     table: dict[str, np.ndarray]
     summary: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def mu_low(self) -> float | None:
-        """Lower end of the confidence interval on mu [-] (None: no lower bound)."""
-        return self.summary.get("mu_low")
-
-    @property
-    def mu_high(self) -> float | None:
-        """Upper end of the confidence interval on mu [-] (None: no upper bound)."""
-        return self.summary.get("mu_high")
-
-    @property
-    def status(self) -> str | None:
-        """``ok`` or why the interval is open or wide."""
-        return self.summary.get("status")
+    mu_low = summary_field("mu_low", "lower end of the confidence interval on mu [-] "
+                                      "(None: no lower bound)")
+    mu_high = summary_field("mu_high", "upper end of the confidence interval on mu [-] "
+                                        "(None: no upper bound)")
+    status = summary_field("status", "``ok`` or why the interval is open or wide")
+    confidence = summary_field("confidence", "level of the confidence sets [-]")
+    mu_hat = summary_field("mu_hat", "best-fitting mu [-]")
+    mu_d = summary_field("mu_d", "best-fitting sliding friction [-]")
+    mu_d_low = summary_field("mu_d_low", "lower end of the interval on the sliding friction [-]")
+    mu_d_high = summary_field("mu_d_high", "upper end of the interval on the sliding friction [-]")
+    t_slip_s = summary_field("t_slip", "fitted slip onset [s]")
+    t_slip_low_s = summary_field("t_slip_low", "last time the ball is surely stuck [s]")
+    t_slip_high_s = summary_field("t_slip_high", "first time the ball surely slips [s]")
+    relative_width = summary_field("relative_width", "(mu_high - mu_low) / mu_hat [-]")
+    fps_hz = summary_field("fps_hz", "frame rate of the record [frames/s]")
+    duration_s = summary_field("duration_s", "length of the record [s]")
+    running_max = summary_field("running_max", "the report's running-max bounds (a dict)")
 
 
 # ------------------------------------------------------------------------------ tracking
