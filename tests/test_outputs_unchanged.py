@@ -77,6 +77,9 @@ def _commands(tmp: Path) -> list[tuple[str, list[str]]]:
         ("simulate", ["simulate", "--mu", "0.004", "--omega0-hz", "-20", "--omega-end-hz",
                       "-26", "--tau-motor", "0.01", "--json", "--out", "sim"]),
         ("export-ssp", ["export-ssp", "--out", "abu.ssp", "--mu", "0.004"]),
+        ("render-random", ["render", "--scenario", "random", "--seed", "3", "--frames", "1200",
+                           "--out", "rr", "--quiet"]),
+        ("measure-random", ["measure", "rr", "--out", "mr", "--no-plots", "--json", "--quiet"]),
         ("next", ["next", "demo/measurement/summary.json", "mt/summary.json", "--json"]),
     ]
 
@@ -93,7 +96,8 @@ def _upgrade(obj):
     if isinstance(obj, list):
         return [_upgrade(v) for v in obj]
     if isinstance(obj, str):  # module names quoted in descriptions
-        return obj.replace("measurement.render", "twin.render")
+        return obj.replace("measurement.render", "twin.render").replace(
+            "measurement.scenario", "twin.scenario")
     return obj
 
 

@@ -1,15 +1,11 @@
-"""Measurement commands of the ``abu`` command line: ``track``, ``measure``, ``measure-summary``,
-``render`` (:mod:`abu.cli.render`), and ``calibrate-camera``, ``measure --camera``
-(:mod:`abu.cli.camera`); the printed text of the summaries is
-:mod:`measurement.report.summary_text`.
+"""Measurement commands of the ``abu`` command line: ``track``, ``measure``, ``measure-summary``.
 
-``abu/cli/main.py`` builds the main parser and calls :func:`register`; every subcommand sets
-``func`` (``args -> exit status``). Errors derived from :class:`abu_model.errors.AbuError` are
-printed by the main program, which exits with status 2. :func:`main` is a stand-alone entry
-point with the same behaviour (used by the tests and ``python -m abu.cli.measure``).
-
-Outputs are computed completely before anything is written, and every file is written
-atomically, so a failing command leaves no half-written file behind.
+Each parses and checks its options, calls :mod:`measurement.pipeline` and writes; the printed text
+of the summaries is :mod:`measurement.report.summary_text`. :mod:`abu.cli.main` builds the
+parser and calls :func:`register`; every subcommand sets ``func`` (``args -> exit status``).
+Errors derived from :class:`abu_model.errors.AbuError` are printed by the main program, which
+exits with status 2. Outputs are computed completely before anything is written, and every file
+is written atomically, so a failing command leaves no half-written file behind.
 """
 from __future__ import annotations
 
