@@ -5,10 +5,11 @@ It reads both halves' formats, so it sits above ``harness`` and ``measurement``.
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any, Sequence
+
+from abu_model import validate
 
 from harness.experiments.simulate_output import SIMULATE_KIND
 from harness.planning.next_run import IntervalsError
@@ -30,10 +31,11 @@ def read_intervals(paths: Sequence[str | Path]) -> list[dict[str, Any]]:
 
 def _checked(name: str, lo: Any, hi: Any, drive: dict | None) -> dict[str, Any]:
     for key, value in (("mu_low", lo), ("mu_high", hi)):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) \
-                or not math.isfinite(value) or value < 0:
+        if value is None or (validate.is_number(value) and math.isinf(value)):
             raise IntervalsError(f"{name}: '{key}' is {value!r}; 'abu next' needs both bounds "
                                  "(a run whose ball slipped inside the record)")
+        validate.number(value, f"{name}, field '{key}'", lo=0.0, error=IntervalsError,
+                        why="a friction coefficient")
     if not lo < hi:
         raise IntervalsError(f"{name}: mu_low = {lo!r} is not below mu_high = {hi!r}")
     return {"name": name, "mu_low": float(lo), "mu_high": float(hi), "drive": drive}
@@ -44,11 +46,11 @@ def read_interval(path: str | Path) -> dict[str, Any]:
     summary.json (``drive``: the drive.json object a measurement recorded, or None)."""
     p = Path(path)
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise IntervalsError(f"{p}: not a readable JSON summary ({exc})") from None
-    if not isinstance(data, dict):
-        raise IntervalsError(f"{p}: expected a JSON object (a summary.json)")
+    data = validate.json_object(text, str(p), "a JSON object (a summary.json)",
+                                error=IntervalsError)
     simulated = data.get("kind") == SIMULATE_KIND or (data.get("kind") is None
                                                       and "experiment" in data)
     if simulated:

@@ -33,8 +33,10 @@ from typing import Any
 
 try:  # the shared error type; a vendored copy inside an FMU falls back to ValueError
     from abu_model.errors import AbuError as _Base
+    from abu_model.validate import json_object as _json_object
 except ImportError:  # pragma: no cover - only without abu_model
     _Base = ValueError  # type: ignore[assignment,misc]
+    _json_object = None
 
 KIND = "abu-drive"
 VERSION = 1
@@ -120,11 +122,19 @@ class Drive:
         return out
 
 
+#: Largest plausible value of each parameter (zeta [-], omega_n [rad/s], tau_motor [s], b [-]):
+#: a damping ratio, the natural frequency of a CD drive's speed loop, a motor's torque lag.
+UPPER = {"zeta": 1000.0, "omega_n_rad_s": 1.0e4, "tau_motor_s": 1.0, "setpoint_weight": 100.0}
+
+
 def _check_number(source: str, name: str, value: Any, low: float, strict: bool) -> float:
+    high = UPPER.get(name, math.inf)
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(float(value)) or (value <= low if strict else value < low):
-        raise DriveFileError(source, f"expected a finite number {'>' if strict else '>='} {low:g}, "
-                                     f"got {value!r}", name)
+            or not math.isfinite(float(value)) or (value <= low if strict else value < low) \
+            or value > high:
+        raise DriveFileError(source, f"expected a finite number {'>' if strict else '>='} {low:g}"
+                                     + (f" and <= {high:g}" if math.isfinite(high) else "")
+                                     + f", got {value!r}", name)
     return float(value)
 
 
@@ -182,6 +192,10 @@ def load_drive(path: str | Path) -> Drive:
         raise DriveFileError(str(p), f"cannot be read ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
         raise DriveFileError(str(p), "is not UTF-8 text (expected a JSON drive file)") from None
+    if _json_object is not None:  # strict: a key given twice, NaN or Infinity refused
+        obj = _json_object(text, str(p), "a JSON object (a drive.json of 'abu identify')",
+                           error=lambda m: DriveFileError(str(p), m.split(": ", 1)[1]))
+        return drive_from_dict(obj, str(p))
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -26,6 +26,8 @@ from abu_model.json_text import dumps
 
 from measurement.imaging import tracks_io
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+from measurement.imaging.markers import MarkerError
+from measurement.imaging.track_checks import check_marker_geometry
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
 #: Frame rate assumed when neither the recording nor the user gives one [frames/s] (the report's).
@@ -182,7 +184,10 @@ def track_recording(path: str | Path, *, fps_hz: float = DEFAULT_FPS,
     frames = rec.frames
     if check is not None:
         check(len(rec))
-    seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
+    try:
+        seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
+    except MarkerError as exc:
+        raise MarkerError(f"{rec.source}, frame 0: {exc}") from None
     h, w = frames.shape[1:]
     _check_seeds_inside(seeds, w, h)
     tracks = track_markers(frames, seeds, method=settings.method, window=settings.window_px,
@@ -228,8 +233,11 @@ def read_tracks(path: str | Path, *, fps_hz: float | None = None) -> MarkerTrack
 
 def fill_tracks(tracks: MarkerTracks) -> MarkerTracks:
     """``tracks`` with lost positions interpolated (short gaps; long ones refused)."""
-    x = tracks_io.fill_lost(tracks.time_s, tracks.x_px, tracks.lost)
-    y = tracks_io.fill_lost(tracks.time_s, tracks.y_px, tracks.lost)
+    try:
+        x = tracks_io.fill_lost(tracks.time_s, tracks.x_px, tracks.lost)
+        y = tracks_io.fill_lost(tracks.time_s, tracks.y_px, tracks.lost)
+    except tracks_io.LostMarkerError as exc:
+        raise tracks_io.LostMarkerError(f"{tracks.source}, column 'lost': {exc}") from None
     return replace(tracks, x_px=x, y_px=y)
 
 
@@ -257,6 +265,7 @@ def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float
         drive: the ``drive.json`` object of the setup (recorded for ``abu next``).
     """
     source = tracks.source
+    check_marker_geometry(tracks.x_px, tracks.y_px, source)
     check_motion_and_roles(tracks.time_s, tracks.x_px, tracks.y_px, source)
     x, y, camera_info = tracks.x_px, tracks.y_px, None
     if camera is not None:
@@ -288,9 +297,14 @@ def measure_recording(path: str | Path, *, fps_hz: float | None = None,
         Others: as :func:`track_recording` and :func:`measure_tracks`.
     """
     fps = DEFAULT_FPS if fps_hz is None else fps_hz
-    tracks = track_recording(path, fps_hz=fps, settings=tracking, log=log,
-                             check=lambda n: check_record_length(np.arange(n) / fps, "--fps",
-                                                                 options))
+    def check(n: int) -> None:
+        if n < tracks_io.MIN_ROWS:
+            from measurement.imaging.recording_checks import RecordingError
+            raise RecordingError(f"{path}: {n} frame{'s' if n != 1 else ''}; the analysis needs "
+                                 f"at least {tracks_io.MIN_ROWS}")
+        check_record_length(np.arange(n) / fps, "--fps", options)
+
+    tracks = track_recording(path, fps_hz=fps, settings=tracking, log=log, check=check)
     return measure_tracks(tracks, l_m=l_m, d_m=d_m, options=options, camera=camera,
                           camera_path=camera_path, drive=drive)
 

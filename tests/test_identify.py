@@ -254,8 +254,12 @@ def test_twin_tracks_identify_then_render_with_drive_measures_true_mu(tmp_path, 
     for name, truth in (("zeta", 0.7), ("omega_n_rad_s", 12.0), ("tau_motor_s", 0.02)):
         assert abs(fit[name] / truth - 1) < 0.05, (name, fit[name])
     drive = str(tmp_path / "id" / "drive.json")
+    # an option the drive replaces is refused, not silently overridden (issue 19)
     assert main(["render", "--out", str(tmp_path / "run"), "--drive", drive, "--seed", "0",
-                 "--zeta", "0.3", "--mu", "0.03", "--quiet"]) == 0  # --drive wins over --zeta
+                 "--zeta", "0.3", "--mu", "0.03", "--quiet"]) == 2
+    assert "--zeta" in capsys.readouterr().err and not (tmp_path / "run").exists()
+    assert main(["render", "--out", str(tmp_path / "run"), "--drive", drive, "--seed", "0",
+                 "--mu", "0.03", "--quiet"]) == 0
     meta = json.loads((tmp_path / "run" / "meta.json").read_text())
     assert meta["drive"]["zeta"] == fit["zeta"]
     assert meta["drive"]["tau_motor_s"] == fit["tau_motor_s"]

@@ -100,10 +100,10 @@ def test_read_intervals_from_summaries_and_csv(tmp_path):
 
 @pytest.mark.parametrize("content, match", [
     ('{"mu_low": 0.03, "mu_high": 0.02}', "exceeds mu_high"),
-    ('{"mu_low": "abc", "mu_high": 0.02}', "not a number"),
+    ('{"mu_low": "abc", "mu_high": 0.02}', "expected a finite number"),
     ('{"mu": 0.03}', "keys mu_low and mu_high"),
     ('{"mu_low": null, "mu_high": null}', "neither"),
-    ("not json", "not a readable JSON"),
+    ("not json", "not JSON"),
 ])
 def test_bad_summaries_are_named(tmp_path, content, match):
     f = tmp_path / "s.json"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import zipfile
 from pathlib import Path
 from typing import Iterable
@@ -210,6 +211,40 @@ def check_sweep(args: argparse.Namespace) -> None:
                 "about 0.4 ms of computing each")
     _check_loop_step(args, 1e-3, te + 0.55)
     in_range("--workers", args.workers, 1, 256, "", "local worker processes")
+    check_scheduler_address(getattr(args, "scheduler", None))
+
+
+#: Transports of a Dask scheduler address (distributed.comm).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+_HOST = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]{0,252}[A-Za-z0-9])?)")
+
+
+def check_scheduler_address(address: str | None) -> None:
+    """``--scheduler`` is a Dask address ``[SCHEME://]HOST[:PORT]`` (syntax only: whether it
+    answers is the sweep's to find out)."""
+    if address is None:
+        return
+    expected = ("a Dask scheduler address [SCHEME://]HOST[:PORT], e.g. tcp://10.0.0.5:8786 "
+                f"(SCHEME one of {', '.join(SCHEDULER_SCHEMES)}; PORT 1..65535)")
+    rest = address.strip()
+    if "://" in rest:
+        scheme, rest = rest.split("://", 1)
+        if scheme.lower() not in SCHEDULER_SCHEMES:
+            raise ParameterError("--scheduler", address, expected)
+        if scheme.lower() == "inproc":
+            return
+    host, port = rest, None
+    if rest.startswith("["):
+        end = rest.find("]")
+        host, tail = rest[:end + 1], rest[end + 1:]
+        if end < 0 or (tail and not tail.startswith(":")):
+            raise ParameterError("--scheduler", address, expected)
+        port = tail[1:] if tail else None
+    elif ":" in rest:
+        host, port = rest.rsplit(":", 1)
+    if not _HOST.fullmatch(host or "") or (port is not None and not (
+            port.isdigit() and 1 <= int(port) <= 65535)):
+        raise ParameterError("--scheduler", address, expected)
 
 
 def check_fmu_dir(option: str, fmu_dir: str | None, names: Iterable[str]) -> None:

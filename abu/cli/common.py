@@ -162,7 +162,8 @@ def _input_of(args: argparse.Namespace) -> str:
 def run_command(build_parser: Callable[[], argparse.ArgumentParser],
                 argv: Sequence[str] | None, *,
                 rename: Callable[[argparse.Namespace, ParameterError], ParameterError]
-                | None = None) -> int:
+                | None = None,
+                precheck: Callable[[str, argparse.Namespace], None] | None = None) -> int:
     """Parse ``argv`` and run ``args.func(args)`` with the toolkit's error policy.
 
     * AbuError (bad option or input, locked or existing output): ``abu CMD: error: ...`` on one
@@ -171,17 +172,22 @@ def run_command(build_parser: Callable[[], argparse.ArgumentParser],
     * anything else: ``abu CMD: internal error on INPUT: Type: message`` on one line, exit 1;
       with ``--debug`` (anywhere before ``--``) the traceback is printed too.
     * KeyboardInterrupt: exit 130; stdout closed by its reader (``| head``): exit 141, quiet.
+
+    ``precheck(command, args)`` runs first (the options a mode ignores are refused there).
     """
     from abu.cli.output_tx import use_run_tempdir
 
     argv, debug = _strip_debug(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
+    track_given(parser)
     args = parser.parse_args(argv)
     command = getattr(args, "command", None) or parser.prog
     args._parser = _subparser(parser, command)
     use_run_tempdir()
     try:
         check_float_options(args._parser, args)
+        if precheck is not None:
+            precheck(command, args)
         status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, inside the error policy, not at exit
         return status
@@ -269,6 +275,60 @@ def _internal(command: str, args: argparse.Namespace, exc: BaseException, debug:
     print(f"abu {command}: internal error on {_input_of(args)}: {type(exc).__name__}: {text}"
           f"{hint}", file=sys.stderr)
     return 1
+
+
+# ---------------------------------------------------------------------------- given options
+#: Namespace attribute holding the dests of the options the user typed (see track_given).
+_GIVEN = "_given_options"
+_RECORDING_CLASSES: dict[type, type] = {}
+
+
+def _recording_class(cls: type) -> type:
+    """A subclass of the argparse action ``cls`` that notes its dest when argparse calls it
+    (it calls an optional's action only when the option is on the command line, whatever the
+    spelling: ``--opt v``, ``--opt=v``, an abbreviation ``--op v``)."""
+    if cls not in _RECORDING_CLASSES:
+        def __call__(self, parser, namespace, values, option_string=None):
+            if option_string is not None:
+                given = getattr(namespace, _GIVEN, None)
+                if given is None:
+                    given = set()
+                    setattr(namespace, _GIVEN, given)
+                given.add(self.dest)
+            return cls.__call__(self, parser, namespace, values, option_string)
+
+        _RECORDING_CLASSES[cls] = type("Given" + cls.__name__, (cls,), {"__call__": __call__})
+    return _RECORDING_CLASSES[cls]
+
+
+def track_given(parser: argparse.ArgumentParser) -> None:
+    """Make ``parser`` (and its subparsers) note which options the user gave explicitly, so
+    that a command can refuse an option its mode ignores (:func:`refuse_given`)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                track_given(sub)
+        elif action.option_strings and not isinstance(action, (argparse._HelpAction,
+                                                               argparse._VersionAction)):
+            if not type(action).__name__.startswith("Given"):
+                action.__class__ = _recording_class(type(action))
+
+
+def given(args: argparse.Namespace, option: str) -> bool:
+    """True if ``option`` (``--mu``) was on the command line (see :func:`track_given`)."""
+    return option.lstrip("-").replace("-", "_") in getattr(args, _GIVEN, set())
+
+
+def refuse_given(args: argparse.Namespace, options: Iterable[str], why: str) -> None:
+    """Refuse the first of ``options`` the user gave explicitly: the chosen mode ignores it.
+
+    ``why`` completes "expected no OPTION ...", e.g. ``"with --scenario random (its mu is drawn
+    from --seed)"``.
+    """
+    for option in options:
+        if given(args, option):
+            value = getattr(args, option.lstrip("-").replace("-", "_"), None)
+            raise ParameterError(option, value, f"no {option} {why}")
 
 
 def add_overwrite(p: argparse.ArgumentParser) -> None:

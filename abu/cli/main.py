@@ -23,6 +23,7 @@ from abu_model.errors import ParameterError
 from abu import __version__
 from abu.cli.common import AbuArgumentParser, option_error, run_command
 from abu.cli.measure import OPTION_OF as MEASURE_OPTION_OF
+from abu.cli.not_applicable import check_not_applicable
 from abu.cli.options_cosim import OPTION_OF as COSIM_OPTION_OF
 
 #: Library parameter name -> command-line option (for error messages).
@@ -53,7 +54,7 @@ def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``abu`` command line; returns the exit status (2 for user errors, 1 for an
     unexpected error, reported in one line; ``--debug`` shows its traceback)."""
-    return run_command(build_parser, argv, rename=_rename)
+    return run_command(build_parser, argv, rename=_rename, precheck=check_not_applicable)
 
 
 if __name__ == "__main__":  # pragma: no cover

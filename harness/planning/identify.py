@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 from scipy.stats import t as student_t
 
-from abu_model.errors import ParameterError
+from abu_model.errors import AbuError, ParameterError
 from controller.drive import MODEL_PARAMETERS, MODELS, Drive
 
 from harness.planning.loop_response import Setpoints, response
@@ -35,6 +35,17 @@ from harness.planning.record_io import Record, omega_from_pulses
 #: Lag-1 autocorrelation of the residuals above which the model is said not to fit.
 R1_MAX = 0.5
 _LOG_TAU_MIN = math.log(1e-5)  # tau_motor below 10 us is indistinguishable from 0
+#: Largest |log| of a fitted parameter (e^50 ~ 5e21): beyond it the fit has run off to zero or
+#: infinity (zeta, omega_n [rad/s], tau_motor [s] and b are physically within 1e-6..1e6).
+_LOG_LIMIT = 50.0
+
+
+class IdentifyError(AbuError, ValueError):
+    """The loop model cannot describe the record (the fit diverged or did not converge)."""
+
+
+class _Diverged(Exception):
+    """Raised inside the residual function to stop a fit that runs off."""
 
 
 @dataclass
@@ -134,24 +145,36 @@ def fit_drive(record: Record, setpoints: Setpoints, model: str = "pi-lag") -> Id
                              f"{np.count_nonzero(t > steps[0])} samples after the first step at "
                              f"{steps[0]:g} s; check the time origin of the setpoints)")
 
+    def disagree(why: str) -> IdentifyError:
+        return _disagree(record.source, model, why)
+
     def resid(q: np.ndarray) -> np.ndarray:
-        r = _model_values(q[:len(names)], model, setpoints, t, kind) - y
-        return r + q[-1] if kind == "theta" else r
+        if not np.all(np.abs(q[:len(names)]) <= _LOG_LIMIT):
+            raise _Diverged("the parameters ran off to zero or infinity")
+        with np.errstate(all="ignore"):
+            r = _model_values(q[:len(names)], model, setpoints, t, kind) - y
+            r = r + q[-1] if kind == "theta" else r
+        if not np.all(np.isfinite(r)):
+            raise _Diverged("the simulated response overflows")
+        return r
 
     def profiled(q: np.ndarray) -> float:  # offset eliminated for the start search
-        r = _model_values(q, model, setpoints, t, kind) - y
-        return float(np.sum((r - r.mean()) ** 2) if kind == "theta" else np.sum(r**2))
+        with np.errstate(all="ignore"):
+            r = _model_values(q, model, setpoints, t, kind) - y
+            cost = float(np.sum((r - r.mean()) ** 2) if kind == "theta" else np.sum(r**2))
+        return cost if math.isfinite(cost) else math.inf
 
     starts = _start_grid(model)
     q0 = min(starts, key=profiled)
+    if not math.isfinite(profiled(q0)):
+        raise disagree("no starting value gives a finite response")
     if kind == "theta":
         q0 = np.append(q0, -np.mean(_model_values(q0, model, setpoints, t, kind) - y))
     lower = np.full(q0.size, -np.inf)
     if model != "second-order":
         lower[2] = _LOG_TAU_MIN
         q0[2] = max(q0[2], _LOG_TAU_MIN + 1e-3)
-    sol = least_squares(resid, q0, bounds=(lower, np.inf), x_scale="jac", method="trf",
-                        xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+    sol = _solve(resid, q0, lower, disagree)
     residual = sol.fun
     check = residual_check(residual)
     dof = max(1, t.size - n_p)
@@ -163,6 +186,9 @@ def fit_drive(record: Record, setpoints: Setpoints, model: str = "pi-lag") -> Id
     k = len(names)
     se_q = np.sqrt(np.clip(np.diag(cov_q)[:k], 0.0, None))
     qt = float(student_t.ppf(0.975, dof))
+    if not (np.all(np.isfinite(cov_q)) and np.all(np.abs(sol.x[:k]) + qt * se_q <= _LOG_LIMIT)):
+        raise disagree("the fitted parameters are not determined by the record: their 95 % "
+                       "intervals span zero to infinity")
     values = dict(zip(names, np.exp(sol.x[:k])))
     ci95 = {n: (float(math.exp(sol.x[i] - qt * se_q[i])), float(math.exp(sol.x[i] + qt * se_q[i])))
             for i, n in enumerate(names)}
@@ -187,6 +213,28 @@ def fit_drive(record: Record, setpoints: Setpoints, model: str = "pi-lag") -> Id
                             check)
     result.report_method = report_method(omega_t, omega_data, setpoints)
     return result
+
+
+def _disagree(source: str, model: str, why: str) -> IdentifyError:
+    return IdentifyError(
+        f"{source}: the {model} model and the record disagree ({why}); check that the "
+        "setpoints (--setpoints, or --omega0-hz, --omega-end-hz, --t0, --te, --step-hz, "
+        "--rounding) are the ones that drove this record, and its time origin and units")
+
+
+def _solve(resid, q0: np.ndarray, lower: np.ndarray, disagree):
+    """least_squares with its failures (divergence, overflow, no convergence) turned into
+    ``disagree(why)`` errors."""
+    try:
+        sol = least_squares(resid, q0, bounds=(lower, np.inf), x_scale="jac", method="trf",
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+    except _Diverged as exc:
+        raise disagree(f"the fit diverged: {exc}") from None
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError, OverflowError) as exc:
+        raise disagree(f"the fit failed: {' '.join(str(exc).split())[:120]}") from None
+    if sol.status <= 0:
+        raise disagree(f"the fit did not converge: {sol.message}")
+    return sol
 
 
 def _omega_samples(record: Record, direction: float) -> tuple[np.ndarray, np.ndarray]:

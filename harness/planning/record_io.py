@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from abu_model import validate
 from abu_model.errors import AbuError
 
 from harness.planning.loop_response import Setpoints
@@ -70,6 +71,12 @@ def _read(path: str | Path, option: str) -> tuple[list[str], list[list[str]], li
     if not lines:
         raise RecordFileError(f"{option} {p}: empty (expected a header line and data rows)")
     header = [c.strip() for c in lines[0][1]]
+    validate.unique_names(header, f"{option} {p}: line {lines[0][0]}", error=RecordFileError)
+    for names in (TIME_NAMES, OMEGA_NAMES, THETA_NAMES):
+        if sum(n in header for n in names) > 1:
+            raise RecordFileError(f"{option} {p}: line {lines[0][0]}: columns "
+                                  f"{' and '.join(repr(n) for n in names)} both present; expected "
+                                  "one (which one is meant?)")
     return header, [r for _, r in lines[1:]], [n for n, _ in lines[1:]]
 
 
@@ -80,14 +87,8 @@ def _column(path, option, header, rows, numbers, names: tuple[str, ...]) -> np.n
     j = header.index(name)
     out = np.empty(len(rows))
     for i, (row, line) in enumerate(zip(rows, numbers)):
-        try:
-            out[i] = float(row[j])
-        except (IndexError, ValueError):
-            got = repr(row[j]) if j < len(row) else "nothing"
-            raise RecordFileError(f"{option} {path}: line {line}, column '{name}': expected a "
-                                  f"number, got {got}") from None
-        if not math.isfinite(out[i]):
-            raise RecordFileError(f"{option} {path}: line {line}, column '{name}': not finite")
+        out[i] = validate.cell(row[j] if j < len(row) else "", f"{option} {path}: line {line}, "
+                               f"column '{name}'", error=RecordFileError)
     return out
 
 
@@ -100,9 +101,10 @@ def _times(path, option, header, rows, numbers, min_rows: int) -> np.ndarray:
         raise RecordFileError(f"{option} {path}: {len(t)} data rows, expected at least {min_rows}")
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
-        raise RecordFileError(f"{option} {path}: line {numbers[bad[0] + 1]}, column "
-                              f"'{header[[h in TIME_NAMES for h in header].index(True)]}': times "
-                              "must increase strictly")
+        k = int(bad[0]) + 1
+        column = header[[h in TIME_NAMES for h in header].index(True)]
+        raise validate.order_error(f"{option} {path}", f"line {numbers[k]}, column '{column}'",
+                                   t[k - 1], t[k], error=RecordFileError)
     return t
 
 

@@ -20,7 +20,6 @@ it leaves on the measured theta.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -30,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from abu_model.atomic_io import atomic_write_text
+from abu_model import validate
 from abu_model.errors import AbuError, ParameterError
 
 CAMERA_KIND = "abu-camera"
@@ -126,11 +126,9 @@ def read_camera(path: str | os.PathLike) -> Camera:
                           ) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CameraError(f"{p}: cannot read the camera file ({exc})") from None
-    try:
-        d = json.loads(text)
-    except ValueError as exc:
-        raise CameraError(f"{p}: not JSON ({exc})") from None
-    if not isinstance(d, dict) or d.get("kind") != CAMERA_KIND:
+    d = validate.json_object(text, p, "a JSON object (a camera file of 'abu calibrate-camera')",
+                             error=CameraError)
+    if d.get("kind") != CAMERA_KIND:
         got = d.get("kind") if isinstance(d, dict) else type(d).__name__
         raise CameraError(f"{p}: field 'kind' = {got!r}: expected '{CAMERA_KIND}' (a file of "
                           "'abu calibrate-camera')")
@@ -148,8 +146,9 @@ def read_camera(path: str | os.PathLike) -> Camera:
     size = _num_array(p, d, "image_size_px", lambda a: a.shape == (2,) and (a >= 1).all()
                       and (a <= MAX_IMAGE_PX).all() and (a == np.round(a)).all(),
                       f"[width, height] in px, integers in 1..{MAX_IMAGE_PX}")
-    rms = _num_array(p, d, "reprojection_rms_px", lambda a: a.ndim == 0 and a >= 0,
-                     "a reprojection RMS >= 0 px")
+    rms = _num_array(p, d, "reprojection_rms_px", lambda a: a.ndim == 0 and 0 <= a <= 100,
+                     "a reprojection RMS in [0, 100] px (a calibration worth using is off by "
+                     "well under a pixel)")
     views = _num_array(p, d, "n_views", lambda a: a.ndim == 0 and 1 <= a <= MAX_FILE_VIEWS
                        and a == round(float(a)), f"an integer in 1..{MAX_FILE_VIEWS}")
     corners = _num_array(p, {"n_corners": 0, **d}, "n_corners", lambda a: a.ndim == 0

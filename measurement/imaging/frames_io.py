@@ -293,8 +293,25 @@ def _check_numbering(p: Path, images: list[Path]) -> None:
     A gap means a frame is missing, which would silently shift the time base of every later
     frame; a repeated number means two files claim the same frame.
     """
+    if len(images) < 2:
+        return
+    # one frame order: one naming pattern (digits aside), no two names of the same number
+    patterns: dict[str, str] = {}
+    for f in images:
+        patterns.setdefault(re.sub(r"\d+", "#", f.name.lower()), f.name)
+    if len(patterns) > 1:
+        a, b = list(patterns.values())[:2]
+        raise RecordingError(f"folder '{p}': the file names do not define one frame order "
+                             f"('{a}' and '{b}' follow different patterns); expected one "
+                             "numbered series of frames (and no other images) in the folder")
+    keys = [natural_key(f.name) for f in images]
+    for i in range(1, len(images)):
+        if keys[i] == keys[i - 1]:
+            raise RecordingError(f"folder '{p}': '{images[i - 1].name}' and '{images[i].name}' "
+                                 "both claim the same place in the frame order (numbers "
+                                 "written with and without leading zeros?)")
     parsed = [re.fullmatch(r"(.*?)(\d+)(\D*)", f.name) for f in images]
-    if len(images) < 2 or not all(parsed):
+    if not all(parsed):
         return
     stems = {(m.group(1), m.group(3).lower()) for m in parsed}
     if len(stems) != 1:

@@ -38,6 +38,10 @@ class MarkerError(AbuError):
     """Markers cannot be found or told apart, or a seeds string is malformed."""
 
 
+#: Smallest distance between two seeds [px]: closer ones are one marker (track_checks).
+MIN_SEED_SEPARATION_PX = 2.0
+
+
 def parse_seeds(text: str, count: int = 3) -> np.ndarray:
     """Parse ``"x,y;x,y;x,y"`` (pixels; x = column, y = row) into a (count, 2) float array.
 
@@ -64,6 +68,14 @@ def parse_seeds(text: str, count: int = 3) -> np.ndarray:
                                   "number") from None
             if not math.isfinite(out[i, j]):
                 raise MarkerError(f"seeds {text!r}: position {i + 1} '{part}' is not finite")
+    for i in range(count):
+        for j in range(i + 1, count):
+            gap = float(np.hypot(*(out[i] - out[j])))
+            if gap < MIN_SEED_SEPARATION_PX:
+                raise MarkerError(
+                    f"seeds {text!r}: positions {i + 1} and {j + 1} are {gap:.3g} px apart; "
+                    f"expected {count} distinct markers (ABU centre; CD marker; ball) at least "
+                    f"{MIN_SEED_SEPARATION_PX:g} px apart")
     return out
 
 

@@ -37,8 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from abu_model import validate
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import AbuError
+
+from measurement.imaging.track_checks import check_marker_geometry
 
 #: Column names of an input tracks CSV, in the order centre, CD, ball.
 COORD_COLUMNS = ("x_center", "y_center", "x_cd", "y_cd", "x_ball", "y_ball")
@@ -137,6 +140,7 @@ def read_tracks_csv(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> Tra
         rows.append((line_no, record))
     if header is None:
         raise TracksFileError(p, f"no header line; expected the columns {','.join(INPUT_COLUMNS)}")
+    _check_header(p, header, header_line)
     index = {}
     # name a missing column in the style of the header (old names without units, or new)
     old_style = any(c in header for c in INPUT_COLUMNS) and \
@@ -163,6 +167,9 @@ def read_tracks_csv(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> Tra
             cell = record[k].strip() if k < len(record) else ""
             if cell == "":
                 raise TracksFileError(p, "empty or missing cell", row=r, line=line_no, column=name)
+            if "_" in cell:  # Python reads 1_0 as 10; no CSV writer means that
+                raise TracksFileError(p, f"non-numeric value {cell!r}", row=r, line=line_no,
+                                      column=name)
             try:
                 value = float(cell)
             except ValueError:
@@ -173,28 +180,42 @@ def read_tracks_csv(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> Tra
                                       line=line_no, column=name)
             data[r - 1, j] = value
         if lost_index is not None and lost_index < len(record) and record[lost_index].strip():
-            cell = record[lost_index].strip()
-            try:
-                mask = int(float(cell))
-            except ValueError:
-                raise TracksFileError(p, f"non-numeric value {cell!r} (expected a bit mask 0-7)",
-                                      row=r, line=line_no, column="lost") from None
-            if not 0 <= mask <= 7:
-                raise TracksFileError(p, f"value {cell!r} out of range (expected a bit mask 0-7)",
-                                      row=r, line=line_no, column="lost")
-            lost_mask[r - 1] = mask
+            lost_mask[r - 1] = _lost_cell(p, record[lost_index], r, line_no)
 
     time = data[:, 0]
     steps = np.diff(time)
     bad = np.flatnonzero(steps <= 0.0)
     if bad.size:
         r = int(bad[0]) + 2  # 1-based data row of the second sample of the pair
-        raise TracksFileError(p, f"time {time[r - 1]!r} s does not increase (previous row has "
-                                 f"{time[r - 2]!r} s)", row=r, line=rows[r - 1][0], column="time")
+        raise validate.order_error(str(p), f"data row {r}, line {rows[r - 1][0]}, column 'time'",
+                                   time[r - 2], time[r - 1],
+                                   error=lambda m: TracksFileError(p, m.split(", ", 1)[1]))
     x = data[:, [1, 3, 5]].copy()
     y = data[:, [2, 4, 6]].copy()
     lost = np.stack([(lost_mask >> bit) & 1 for bit in range(3)], axis=1).astype(bool)
+    check_marker_geometry(x, y, str(p), valid=~lost.any(axis=1),
+                          label=lambda k: f"data row {k + 1} (line {rows[k][0]})")
     return TrackTable(time=time, x=x, y=y, lost=lost, path=str(p))
+
+
+def _lost_cell(p: Path, cell: str, row: int, line: int) -> int:
+    """The ``lost`` bit mask of one row (an integer 0-7)."""
+    return int(validate.cell(cell, "lost", lo=0, hi=7, integer=True,
+                             why="a bit mask: 1 centre, 2 CD, 4 ball",
+                             error=lambda m: TracksFileError(p, m.split(": ", 1)[1], row=row,
+                                                             line=line, column="lost")))
+
+
+def _check_header(p: Path, header: list[str], header_line: int) -> None:
+    """Each column once: no repeated name, not both the old and the unit-suffixed name."""
+    validate.unique_names(header, f"{p}, line {header_line}",
+                          error=lambda m: TracksFileError(p, m.split(": ", 1)[1],
+                                                          line=header_line))
+    both = [c for c in INPUT_COLUMNS if c in header and c + UNIT_SUFFIX[c] in header]
+    if both:
+        raise TracksFileError(p, f"both '{both[0]}' and '{both[0]}{UNIT_SUFFIX[both[0]]}'; "
+                                 "expected one column per quantity (which one is meant?)",
+                              line=header_line, column=both[0])
 
 
 def lost_bitmask(lost: np.ndarray) -> np.ndarray:

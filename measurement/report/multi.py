@@ -23,34 +23,45 @@ All counts are computed exactly from the endpoints (the grid only draws the hist
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 from pathlib import Path
 
 import numpy as np
 
+from abu_model import validate
 from abu_model.atomic_io import atomic_open
 from abu_model.errors import AbuError
+
+
+#: Largest friction coefficient a bound may state (dry friction coefficients are below about 1).
+MAX_MU = 100.0
 
 
 class IntervalInputError(AbuError, ValueError):
     """A summary file or interval list cannot be read or holds an invalid interval."""
 
 
-def _check_pair(where: str, lo, hi) -> tuple[float, float]:
+def _check_pair(where: str, lo, hi, *, text: bool = False) -> tuple[float, float]:
+    """The interval [lo, hi] of a summary (JSON values: numbers or null) or of a CSV row
+    (``text``: cells, empty for a missing bound). A JSON string or boolean is not a number."""
     def num(name, v, default):
-        if v is None or v == "":
+        if v is None or (text and v.strip() == ""):
             return default
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise IntervalInputError(f"{where}: {name} = {v!r} is not a number") from None
-        if math.isnan(f) or f < 0:
-            raise IntervalInputError(f"{where}: {name} = {v!r}; expected a number >= 0 or empty")
-        return f
+        place = f"{where}, {'column' if text else 'field'} '{name}'"
+        expected = dict(lo=0.0, finite=False, error=IntervalInputError,
+                        why="a friction coefficient; empty or null for no bound" if text
+                        else "a friction coefficient; null for no bound")
+        if text:
+            if v.strip().lower() in ("inf", "+inf", "infinity") and name == "mu_high":
+                return math.inf
+            return validate.cell(v, place, lo=0.0, hi=MAX_MU, why=expected["why"],
+                                 error=IntervalInputError)
+        return validate.number(v, place, **{**expected, "finite": True, "hi": MAX_MU})
     lo_f = num("mu_low", lo, 0.0)
     hi_f = num("mu_high", hi, math.inf)
+    if math.isinf(lo_f):
+        raise IntervalInputError(f"{where}: mu_low = {lo!r}; expected a finite lower bound")
     if lo_f > hi_f:
         raise IntervalInputError(f"{where}: mu_low = {lo_f:g} exceeds mu_high = {hi_f:g}")
     if lo_f == 0.0 and math.isinf(hi_f):
@@ -78,7 +89,7 @@ def _check_kind(p: Path, data: object) -> None:
         raise IntervalInputError(f"{p}: kind '{kind}' is not a measurement; expected the "
                                  f"summary.json of 'abu measure' (kind '{MEASURE_KIND}')")
     version = data.get("format_version", 1)
-    if kind is not None and version != 1:
+    if kind is not None and (not validate.is_number(version) or version != 1):
         raise IntervalInputError(f"{p}: format_version {version!r}; this version reads 1")
 
 
@@ -95,25 +106,14 @@ def read_intervals(paths: list[str | os.PathLike]) -> list[dict]:
             raise IntervalInputError(f"{p}: " + ("not a regular file" if p.exists()
                                                  else "file not found"))
         if p.suffix.lower() == ".csv":
-            with open(p, newline="", encoding="utf-8") as handle:
-                rows = [r for r in csv.reader(handle) if r and not r[0].lstrip().startswith("#")]
-            if not rows or "mu_low" not in rows[0] or "mu_high" not in rows[0]:
-                raise IntervalInputError(f"{p}: expected a header with columns mu_low,mu_high")
-            head = rows[0]
-            il, ih = head.index("mu_low"), head.index("mu_high")
-            iname = head.index("name") if "name" in head else None
-            for r_no, row in enumerate(rows[1:], start=1):
-                where = f"{p}, data row {r_no}"
-                if max(il, ih) >= len(row):
-                    raise IntervalInputError(f"{where}: missing cells")
-                lo, hi = _check_pair(where, row[il].strip(), row[ih].strip())
-                name = row[iname] if iname is not None and iname < len(row) else f"{p.name}:{r_no}"
-                out.append({"name": name, "mu_low": lo, "mu_high": hi})
+            out.extend(_read_intervals_csv(p))
             continue
         try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
             raise IntervalInputError(f"{p}: not a readable JSON summary ({exc})") from None
+        data = validate.json_object(text, str(p), "a JSON object (an 'abu measure' summary)",
+                                    error=IntervalInputError)
         _check_kind(p, data)
         if not isinstance(data, dict) or "mu_low" not in data or "mu_high" not in data:
             raise IntervalInputError(f"{p}: expected an 'abu measure' summary with keys mu_low "
@@ -122,6 +122,35 @@ def read_intervals(paths: list[str | os.PathLike]) -> list[dict]:
         out.append({"name": str(p), "mu_low": lo, "mu_high": hi})
     if not out:
         raise IntervalInputError("no intervals given")
+    return out
+
+
+def _read_intervals_csv(p: Path) -> list[dict]:
+    """Intervals of a CSV with columns mu_low,mu_high[,name] (one per data row)."""
+    try:
+        with open(p, newline="", encoding="utf-8") as handle:
+            rows = [(n + 1, r) for n, r in enumerate(csv.reader(handle))
+                    if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise IntervalInputError(f"{p}: not a CSV text file ({exc})") from None
+    head = [c.strip() for c in rows[0][1]] if rows else []
+    if "mu_low" not in head or "mu_high" not in head:
+        raise IntervalInputError(f"{p}: expected a header with columns mu_low,mu_high")
+    validate.unique_names(head, f"{p}, header", error=IntervalInputError)
+    if len(rows) < 2:
+        raise IntervalInputError(f"{p}: a header and no data rows; expected one row "
+                                 "mu_low,mu_high per record")
+    il, ih = head.index("mu_low"), head.index("mu_high")
+    iname = head.index("name") if "name" in head else None
+    out = []
+    for r_no, (line, row) in enumerate(rows[1:], start=1):
+        where = f"{p}, data row {r_no} (line {line})"
+        if len(row) != len(head):
+            raise IntervalInputError(f"{where}: {len(row)} cells; expected {len(head)} as in "
+                                     "the header")
+        lo, hi = _check_pair(where, row[il], row[ih], text=True)
+        name = row[iname].strip() if iname is not None else f"{p.name}:{r_no}"
+        out.append({"name": name or f"{p.name}:{r_no}", "mu_low": lo, "mu_high": hi})
     return out
 
 
