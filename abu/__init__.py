@@ -4,9 +4,16 @@ The public Python API is :mod:`abu.api` (``from abu import api``); the command l
 :mod:`abu.cli` (``abu --help``). SI units throughout (rad, rad/s, s, m, kg); speeds in Hz only
 where a name ends in ``_hz``.
 """
-from importlib.metadata import PackageNotFoundError, version as _version
 
-try:
-    __version__ = _version("abu-friction")
-except PackageNotFoundError:  # pragma: no cover - run from a source tree without install
-    __version__ = "0+unknown"
+
+def __getattr__(name: str):
+    """``__version__``, looked up on first use: importing importlib.metadata costs ~20 ms of
+    every command's start (``abu measure`` must finish within the recording's duration)."""
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            return version("abu-friction")
+        except PackageNotFoundError:  # pragma: no cover - a source tree without install
+            return "0+unknown"
+    raise AttributeError(f"module 'abu' has no attribute {name!r}")

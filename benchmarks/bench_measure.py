@@ -1,21 +1,29 @@
-"""Whole-process time of ``abu measure`` on one 3072-frame recording, and where the time goes.
+"""Whole-process time of ``abu measure`` on one 3072-frame recording against the recording's
+duration, and where the time goes.
 
-Renders one recording of the harsh twin (``twin.scenario.random_scenario(seed)``, 256 px,
-3072 frames) as a multi-page TIFF, then times ``abu measure REC --out DIR`` with its default
-settings as a fresh process (imports, read, track, analyse, uncertainty, plots), pinned to one
-core (``taskset -c 0`` when available) -- median of ``--repeat`` (default 5) runs. The same
-runs with ``--no-plots`` are alternated with them (the peer: the price of the figures). Then one
-in-process run under ``cProfile`` splits the time into imports, reading, tracking, analysis
-(kinematics, harmonics, running max, model inference) and plots.
+Renders one recording of the harsh twin (``twin.scenario.random_scenario(seed)``, 256x256 px,
+3072 frames at 4500 frames/s = 0.683 s) as a multi-page TIFF (what ``abu render`` writes), then
+runs ``abu measure REC --out DIR`` with its default settings as a fresh process (imports, read,
+track, analyse, uncertainty, write, figures), pinned to one core (``taskset -c 0`` when
+available, one BLAS thread), ``--repeat`` times (default 5), alternating with the same command
+with ``--no-plots`` (the peer: the price of the figures). For every run it prints the wall
+time and the child's CPU time (user + sys, ``getrusage(RUSAGE_CHILDREN)``; on a machine other
+people load, the CPU time is the figure to compare), their medians and the ratio to the
+recording's duration (the targets of issue 20: <= 1.0x without figures, <= 1.5x with them, on
+an idle core).
+
+Then one in-process run, timed stage by stage with ``time.process_time`` (no profiler
+overhead): imports, reading, finding the markers, tracking, analysis (kinematics, harmonics,
+running maximum, model inference over the Savitzky-Golay windows), writing the CSV/JSON and
+drawing the figures.
 
     nice python benchmarks/bench_measure.py [--seed 1] [--repeat 5]
 """
 from __future__ import annotations
 
 import argparse
-import cProfile
 import os
-import pstats
+import resource
 import shutil
 import statistics
 import subprocess
@@ -27,6 +35,40 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+STAGES = r'''
+import sys, time, tempfile
+T = time.process_time
+t0 = T()
+import numpy as np
+from measurement import pipeline
+from measurement.imaging.frames_io import read_recording
+from measurement.imaging.markers import find_markers
+from measurement.imaging.reflections import track_markers
+from measurement.inference.analysis import analyse_tracks
+t_imp = T() - t0
+rec_path, refl = sys.argv[1], int(sys.argv[2])
+out = {"imports (measurement, numpy, tifffile, cv2)": t_imp}
+t = T(); rec = read_recording(rec_path); out["read recording"] = T() - t
+t = T(); seeds, _ = find_markers(np.asarray(rec.frames[0]), ball_reflections=refl)
+out["find markers (frame 0)"] = T() - t
+t = T(); tracks = track_markers(rec.frames, seeds, ball_reflections=refl)
+out["tracking"] = T() - t
+t = T(); mt = pipeline.track_recording(rec_path, settings=pipeline.TrackingSettings(
+    ball_reflections=refl))
+pipe_track = T() - t
+t = T(); res = pipeline.measure_tracks(mt); out["analysis + uncertainty"] = T() - t
+d = tempfile.mkdtemp()
+t = T(); pipeline.write_measurement(res, d, plots=False); out["write CSV + JSON"] = T() - t
+t = T(); import matplotlib.figure, matplotlib.backends.backend_agg
+out["figures: import matplotlib"] = T() - t
+t = T(); from measurement.report.plots import plot_analysis; plot_analysis(res.table, res.summary, d)
+out["figures: draw + PNG"] = T() - t
+for k, v in out.items():
+    print(f"{k}\t{v}")
+print(f"(read + markers + tracking + gap filling through the pipeline: {pipe_track:.3f} s)",
+      file=sys.stderr)
+'''
+
 
 def abu_cmd() -> list[str]:
     exe = Path(sys.executable).with_name("abu")
@@ -36,11 +78,25 @@ def abu_cmd() -> list[str]:
     return base
 
 
-def timed(cmd: list[str]) -> float:
+def timed(cmd: list[str]) -> tuple[float, float]:
+    """(wall, CPU user + sys) seconds of one run of ``cmd`` as a child process."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                   env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
-    return time.perf_counter() - t0
+                   env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+                        "PYTHONPATH": str(ROOT)})
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def _line(label: str, runs: list[tuple[float, float]], duration: float) -> str:
+    wall = statistics.median(r[0] for r in runs)
+    cpu = statistics.median(r[1] for r in runs)
+    return (f"  {label:<26s} wall median {wall:.3f} s = {wall / duration:.2f} x recording; "
+            f"CPU median {cpu:.3f} s = {cpu / duration:.2f} x recording\n"
+            f"  {'':<26s} (wall runs {', '.join(f'{r[0]:.2f}' for r in runs)}; "
+            f"CPU runs {', '.join(f'{r[1]:.2f}' for r in runs)})")
 
 
 def main() -> None:
@@ -55,50 +111,42 @@ def main() -> None:
         scn = random_scenario(args.seed)
         render_scenario(tmp / "rec", scn)
         rec = tmp / "rec" / "frames.tif"
+        duration = scn.n_frames / scn.fps
         refl = ["--ball-reflections", "2"] if scn.lighting.reflections == 2 else []
         base = abu_cmd() + ["measure", str(rec), "--out", str(tmp / "out"), "--overwrite",
                             "--quiet"] + refl
+        timed(base + ["--no-plots"])             # warm the page cache and the .pyc files
         whole, noplot = [], []
         for _ in range(args.repeat):              # alternate the two, several pairs
             whole.append(timed(base))
             noplot.append(timed(base + ["--no-plots"]))
-        print(f"abu measure on {scn.n_frames} frames ({scn.width}x{scn.height} px, seed "
-              f"{args.seed}, {scn.lighting.reflections} reflection(s)), whole process, one core:")
-        print(f"  default settings (with plots): median {statistics.median(whole):.2f} s "
-              f"(runs {', '.join(f'{t:.2f}' for t in whole)})")
-        print(f"  --no-plots (peer):             median {statistics.median(noplot):.2f} s "
-              f"(runs {', '.join(f'{t:.2f}' for t in noplot)}); plots cost "
-              f"{statistics.median(whole) - statistics.median(noplot):.2f} s")
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "import abu.cli.main"], check=True)
-        print(f"  'import abu.cli.main' alone: {time.perf_counter() - t0:.2f} s (fresh process)")
+        print(f"abu measure on {scn.n_frames} frames ({scn.width}x{scn.height} px, "
+              f"{scn.fps:g} frames/s = {duration:.3f} s recorded; seed {args.seed}, "
+              f"{scn.lighting.reflections} reflection(s)), whole process, one core, "
+              f"{args.repeat} alternated pairs:")
+        print(_line("default (with figures):", whole, duration))
+        print(_line("--no-plots (peer):", noplot, duration))
+        print(f"  figures cost {statistics.median(r[1] for r in whole) - statistics.median(r[1] for r in noplot):.3f} s CPU "
+              f"(median difference)")
+        start = timed([sys.executable, "-c", "import abu.cli.main"])
+        print(f"  'import abu.cli.main' alone (fresh process): wall {start[0]:.3f} s, "
+              f"CPU {start[1]:.3f} s")
 
-        # where the time goes: one in-process run under cProfile (imports included)
-        prof = cProfile.Profile()
-        prof.enable()
-        from abu.cli.main import main as abu_main
-        abu_main(["measure", str(rec), "--out", str(tmp / "out2"), "--quiet"] + refl)
-        prof.disable()
-        st = pstats.Stats(prof)
-        total = st.total_tt
-        parts = {
-            "read recording": ["frames_io.py:read_recording"],
-            "tracking": ["tracking.py:track_recording", "reflections.py:track_markers"],
-            "analysis (all)": ["analysis.py:analyse_tracks"],
-            "  kinematics": ["kinematics.py:savgol_kinematics"],
-            "  harmonic removal": ["harmonic.py:remove_harmonic"],
-            "  running-max interval": ["interval.py:slip_interval"],
-            "  model inference": ["inference.py:infer_mu"],
-            "plots": ["plots.py:plot_analysis"],
-            "CSV text": ["cli.py:format_table_csv", "tracks_io.py:format_tracks_csv"],
-        }
-        cum = {}
-        for (fname, _line, func), v in st.stats.items():
-            key = f"{Path(fname).name}:{func}"
-            cum[key] = max(cum.get(key, 0.0), v[3])
-        print(f"  in-process profile (total {total:.2f} s incl. imports and profiler overhead):")
-        for label, keys in parts.items():
-            print(f"    {label:<24s} {sum(cum.get(k, 0.0) for k in keys):6.3f} s")
+        # where the time goes: one in-process run, stage by stage (CPU time, no profiler)
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+               "PYTHONPATH": str(ROOT)}
+        cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + [
+            sys.executable, "-c", STAGES, str(rec), str(scn.lighting.reflections)]
+        proc = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+        print("  stages of one in-process run (CPU time, process_time):")
+        total = 0.0
+        for row in proc.stdout.strip().splitlines():
+            name, value = row.split("\t")
+            total += float(value)
+            print(f"    {name:<44s} {float(value):6.3f} s = {float(value) / duration:5.2f} x "
+                  "recording")
+        print(f"    {'sum':<44s} {total:6.3f} s (interpreter start-up not included)")
+        print("    " + proc.stderr.strip())
 
 
 if __name__ == "__main__":

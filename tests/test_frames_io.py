@@ -230,3 +230,56 @@ def test_conversion_in_blocks_equals_the_whole_array_conversion():
     expect_bgr = np.clip(np.rint(bgr.astype(np.float32) @ w[::-1]), 0, 255).astype(np.uint8)
     np.testing.assert_array_equal(fmt.luma(bgr, "BGR"), expect_bgr)
     assert np.abs(expect_bgr.astype(int) - expect).max() <= 1     # summation order only
+
+
+def test_fast_tiff_check_accepts_only_what_the_page_by_page_check_accepts(tmp_path, stack,
+                                                                           monkeypatch):
+    """The vectorised check of the page headers (recording_checks._uniform_stack_whole) takes
+    our writer's stack, big-endian and BigTIFF ones too; on 300 seeded damaged copies (cuts and
+    bit flips in the page headers and next-page pointers, flips in the pixels) every file is
+    refused with the same message or read to the same pixels as with the fast check off."""
+    from measurement.imaging import recording_checks as rc
+
+    fast_calls = []
+    real = rc._uniform_stack_whole
+
+    def spy(*a):
+        fast_calls.append(real(*a))
+        return fast_calls[-1]
+
+    layouts = {"ours.tif": {}, "be.tif": {"byteorder": ">"}, "big.tif": {"bigtiff": True}}
+    for name, kw in layouts.items():
+        tifffile.imwrite(tmp_path / name, stack, photometric="minisblack", contiguous=True, **kw)
+        with tifffile.TiffFile(tmp_path / name) as tif:
+            len(tif.pages)
+            assert real(tmp_path / name, tif, (tmp_path / name).stat().st_size), name
+
+    def outcome(path, fast: bool):
+        monkeypatch.setattr(rc, "_uniform_stack_whole", spy if fast else (lambda *a: False))
+        try:
+            return np.asarray(read_recording(path).frames).tobytes()
+        except RecordingError as exc:
+            return str(exc)
+
+    original = (tmp_path / "ours.tif").read_bytes()
+    with tifffile.TiffFile(tmp_path / "ours.tif") as tif:
+        headers = [(pg.offset, pg.offset + 2 + 12 * len(pg.tags) + 4) for pg in tif.pages[1:]]
+    rng = np.random.default_rng(20)
+    accepted = 0
+    for case in range(300):
+        data = bytearray(original)
+        if case % 3 == 0:
+            data = data[:int(rng.integers(len(data) // 2, len(data)))]
+        elif case % 3 == 1:   # a flip in the pixels: a whole file, taken by the fast check
+            data[int(rng.integers(headers[0][0] - stack[0].size, headers[0][0]))] ^= 0x10
+        else:
+            lo, hi = headers[int(rng.integers(len(headers)))]
+            pos = int(rng.integers(lo, hi))
+            data[pos] ^= 1 << int(rng.integers(8))
+        path = tmp_path / "damaged.tif"
+        path.write_bytes(bytes(data))
+        fast_calls.clear()
+        with_fast = outcome(path, True)
+        accepted += any(fast_calls)
+        assert with_fast == outcome(path, False), case
+    assert accepted >= 100  # at least the pixel flips

@@ -20,7 +20,6 @@ from typing import Sequence
 
 from abu_model.errors import ParameterError
 
-from abu import __version__
 from abu.cli.common import AbuArgumentParser, option_error, run_command
 from abu.cli.measure import OPTION_OF as MEASURE_OPTION_OF
 from abu.cli.not_applicable import check_not_applicable
@@ -30,6 +29,19 @@ from abu.cli.options_cosim import OPTION_OF as COSIM_OPTION_OF
 OPTION_OF = {**MEASURE_OPTION_OF, **COSIM_OPTION_OF}
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (see abu.__getattr__)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="show the program's version number and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import abu
+
+        parser.exit(message=f"{parser.prog} {abu.__version__}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``abu`` argument parser with every subcommand."""
     from abu.cli import camera, demo, export, measure, plan, render, simulate
@@ -37,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = AbuArgumentParser(
         prog="abu", description="Static friction of a ball in an automatic balancing unit: "
                                 "FMI co-simulation and high-speed camera measurement.")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("--version", action=_VersionAction)
     parser.add_argument("--debug", action="store_true",
                         help="show the traceback of an unexpected error (any position)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -54,8 +54,10 @@ METHODS = ("isocontour", "report", "moments")
 DEFAULT_METHOD = "isocontour"
 DEFAULT_WINDOW = 30
 
-#: Frames per vectorised batch (bounds memory: batch * markers * window^2 floats).
-BATCH_FRAMES = 256
+#: Frames per vectorised batch (bounds memory: batch * markers * window^2 floats). 128 keeps a
+#: batch's windows in the CPU cache: the refinement of 3072 frames took ~115 ms of CPU against
+#: ~140 ms with 256 (same results; the batch only groups independent windows).
+BATCH_FRAMES = 128
 
 
 class TrackingError(AbuError):
