@@ -42,6 +42,8 @@ MINGW = "x86_64-w64-mingw32-gcc"
 #: Flags of every compile: ISO C99, and no fused multiply-add (it would round differently
 #: from the Python FMUs, which the native ones reproduce to the last bits).
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-shared", "-Wall")
+#: The ``generationTool`` of every native FMU's model description (:func:`is_native_fmu`).
+GENERATION_TOOL = "abu-friction native build (fmus/native_build.py)"
 FMU_OPTIONS = {"canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
                "canHandleVariableCommunicationStepSize": "true",
                "canNotUseMemoryManagementFunctions": "false"}
@@ -95,7 +97,7 @@ def _model_description(spec: NativeSpec, stage: Path) -> ET.Element:
     co_sim = root.find("CoSimulation")
     co_sim.attrib.pop("needsExecutionTool", None)  # no Python needed
     co_sim.attrib.update(FMU_OPTIONS)
-    root.set("generationTool", "abu-friction native build (fmus/native_build.py)")
+    root.set("generationTool", GENERATION_TOOL)
     raw = ET.tostring(root, encoding="UTF-8")
     fixed = fix_model_description(raw, InterfaceSpec(dict(cls.UNITS),
                                                       dict(cls.OUTPUT_DEPENDENCIES),
@@ -167,6 +169,26 @@ def build_native_fmu(spec: NativeSpec, out_dir: Path, win64: bool) -> Path:
             zf.write(SOURCE_DIR / "LICENSE-FMI2-HEADERS.txt",
                      "documentation/licenses/LICENSE-FMI2-HEADERS.txt")
         return target
+
+
+def is_native_fmu(fmu: str | os.PathLike) -> bool:
+    """True if the FMU file ``fmu`` is one of the native build's (its model description names
+    :data:`GENERATION_TOOL`); False for any other FMU, also one that cannot be read."""
+    try:
+        with zipfile.ZipFile(fmu) as archive:
+            root = ET.fromstring(archive.read("modelDescription.xml"))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, ET.ParseError):
+        return False
+    return root.get("generationTool") == GENERATION_TOOL
+
+
+def platforms(fmu: str | os.PathLike) -> list[str]:
+    """What an FMU file carries: its ``binaries/<platform>`` folders, then ``sources``."""
+    with zipfile.ZipFile(fmu) as archive:
+        names = archive.namelist()
+    found = sorted({n.split("/")[1] for n in names
+                    if n.startswith("binaries/") and n.count("/") >= 2 and n.split("/")[1]})
+    return found + (["sources"] if any(n.startswith("sources/") for n in names) else [])
 
 
 def build_native_fmus(out_dir: str | os.PathLike, *, win64: bool | None = None

@@ -249,7 +249,8 @@ def check_scheduler_address(address: str | None) -> None:
 
 def check_fmu_dir(option: str, fmu_dir: str | None, names: Iterable[str]) -> None:
     """``fmu_dir`` is a folder and each FMU in it is a zip archive with a modelDescription.xml
-    (a missing one is built there)."""
+    (a missing one is built there); a folder of native FMUs holds all three and no other
+    (:func:`harness.experiments.fmu_files.fmu_dir_kind`)."""
     if fmu_dir is None:
         return
     folder = Path(fmu_dir)
@@ -269,3 +270,6 @@ def check_fmu_dir(option: str, fmu_dir: str | None, names: Iterable[str]) -> Non
         except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
             raise ParameterError(option, fmu_dir, f"a folder of valid FMUs: '{path}' is not a "
                                  f"readable FMU ({exc}); delete it to have it rebuilt") from None
+    from harness.experiments.fmu_files import fmu_dir_kind
+
+    fmu_dir_kind(folder, option)  # one build, complete if native

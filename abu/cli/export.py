@@ -1,7 +1,8 @@
 """``abu export-ssp``: the staircase experiment as an SSP 1.0 archive for other FMI tools.
 
 Takes the same staircase, speed-controller and plant options as ``abu simulate`` (defined in
-:mod:`abu.cli.options_cosim`) plus ``--comm-step``, builds the three FMUs fresh and writes
+:mod:`abu.cli.options_cosim`) plus ``--comm-step`` and ``--native`` (the native C FMUs, which
+need no Python, instead of the pythonfmu ones), builds the three FMUs fresh and writes
 ``SystemStructure.ssd``, the FMUs and the parameter set into one ``.ssp`` file
 (:mod:`fmus.ssp`). The archive runs unchanged in libcosimpy (``from_ssp_file``) and
 ``fmpy.ssp.simulate_ssp``; see docs/fmus.md.
@@ -42,6 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("run")
     g.add_argument("--comm-step", type=float, default=1e-3,
                    help="fixed communication step of the default experiment [s] (default 0.001)")
+    g.add_argument("--native", action="store_true",
+                   help="package the native C FMUs (no Python needed; linux64, win64 if the "
+                        "mingw-w64 cross compiler is installed, and sources/) instead of the "
+                        "pythonfmu ones")
     add_overwrite(g)
     # a fixed-step archive: no error-controlled steps (simulate's --tol) to describe
     p.set_defaults(func=cmd_export_ssp, tol=None)
@@ -50,6 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def cmd_export_ssp(args: argparse.Namespace) -> int:
     """Validate the options, build the FMUs into a temporary folder, write the archive."""
     from fmus.build import build_fmus
+    from fmus.native_build import build_native_fmus
     from fmus.ssp import Experiment, write_ssp
 
     out = Path(args.out)
@@ -65,9 +71,10 @@ def cmd_export_ssp(args: argparse.Namespace) -> int:
     # the target is checked (and locked) first: a refused --out costs no FMU build
     with output_file(out, overwrite=args.overwrite) as target, \
             tempfile.TemporaryDirectory(prefix="abu_ssp_fmus_") as tmp:
-        system = exp.system(build_fmus(tmp))
+        system = exp.system(build_native_fmus(tmp) if args.native else build_fmus(tmp))
         write_ssp(target, system.components, system.connections, experiment)
     print(f"wrote {out} (start {exp.t_start:g} s, stop {exp.t_end:g} s, "
-          f"step {exp.comm_step:g} s; components ref, ctrl, plant)")
+          f"step {exp.comm_step:g} s; components ref, ctrl, plant"
+          f"{', native FMUs' if args.native else ''})")
     return 0
 

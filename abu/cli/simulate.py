@@ -30,8 +30,13 @@ TABLE41_UNITS = {"mu": "-", "omega0_hz": "Hz", "threshold_hz": "Hz", "jump_rad_s
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``build-fmus``, ``simulate``, ``table41`` and ``sweep`` to the subcommands."""
     p = sub.add_parser("build-fmus", help="build AbuBall.fmu, SpeedController.fmu, Staircase.fmu",
-                       description="Build the three FMI 2.0 co-simulation FMUs (pythonfmu).")
+                       description="Build the three FMI 2.0 co-simulation FMUs: pythonfmu "
+                                   "(default) or, with --native, compiled C that needs no "
+                                   "Python (linux64, win64 if the mingw-w64 cross compiler "
+                                   "is installed, and sources/).")
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--native", action="store_true",
+                   help="build the native C FMUs (a C compiler needed; see docs/fmus.md)")
     add_overwrite(p)
     p.set_defaults(func=cmd_build_fmus)
 
@@ -109,12 +114,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_build_fmus(args: argparse.Namespace) -> int:
     from fmus.build import build_fmus
+    from fmus.native_build import build_native_fmus, platforms
 
     out = Path(args.out)
     with output_folder(out, overwrite=args.overwrite) as tmp:
-        built = build_fmus(tmp)
+        built = build_native_fmus(tmp) if args.native else build_fmus(tmp)
+        carries = {name: platforms(path) for name, path in built.items()} if args.native else {}
     for name, path in built.items():
-        print(f"{name}: {out / path.name}")
+        extra = f" ({', '.join(carries[name])})" if args.native else ""
+        print(f"{name}: {out / path.name}{extra}")
     return 0
 
 
@@ -181,6 +189,7 @@ def cmd_table41(args: argparse.Namespace) -> int:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from fmus.build import build_fmus
 
+    from harness.experiments.fmu_files import fmu_dir_kind
     from harness.experiments.staircase import StaircaseExperiment
     from harness.experiments.sweep import run_sweep, sweep_grid, write_sweep_csv
 
@@ -202,7 +211,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise renamed(exc) from None
     with output_file(out, overwrite=args.overwrite) as tmp:  # locked before the runs
-        build_fmus(fmu_dir)
+        if not (args.fmu_dir and fmu_dir_kind(fmu_dir, "--fmu-dir") == "native"):
+            build_fmus(fmu_dir)  # (a native build is used as it is)
         started = time.perf_counter()
         rows = run_sweep(points, base, fmu_dir, scheduler=args.scheduler,
                          workers=args.workers, progress=args.progress)

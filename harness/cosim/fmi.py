@@ -85,6 +85,7 @@ class Instance:
         self.abandoned = False  # left unfreed after fmi2Fatal
         self.can_get_state = bool(self.md.coSimulation.canGetAndSetFMUstate)
         self.unzipdir = unzipdir
+        self.bare: dict[str, Any] = {}  # component and argtype-free functions (see bare())
         # Output dependencies on inputs; None means "every input" (FMI default).
         inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
         self.dependencies: dict[str, list[str]] = {}
@@ -125,11 +126,14 @@ class Guard:
     def __exit__(self, exc_type, exc, tb) -> bool:
         if exc_type is None or not issubclass(exc_type, FMICallException):
             return False
-        inst = self.inst
-        inst.failed_status = exc.status
-        status = STATUS[exc.status] if 0 <= exc.status < len(STATUS) else str(exc.status)
-        raise FMUError(inst.name, inst.path, exc.function or self.what, status,
-                       list(inst.messages)) from None
+        fail(self.inst, exc.function or self.what, exc.status)
+
+
+def fail(inst: "Instance", function: str, status: int) -> None:
+    """Raise the FMUError of ``inst``'s failed call ``function`` (fmi2Status ``status``)."""
+    inst.failed_status = status
+    label = STATUS[status] if 0 <= status < len(STATUS) else str(status)
+    raise FMUError(inst.name, inst.path, function, label, list(inst.messages)) from None
 
 
 GETTERS = {"Real": "getReal", "Integer": "getInteger", "Boolean": "getBoolean"}
@@ -210,17 +214,41 @@ def clean_message(text: str) -> str:
 _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
 
 
+def bare(inst: Instance, name: str) -> tuple[ctypes.c_void_p, Any]:
+    """(component, FMI function ``name``) of ``inst`` for direct calls: the component as a
+    ``c_void_p`` and the function WITHOUT ctypes ``argtypes`` (its own pointer, fmpy's is
+    untouched), returning the fmi2Status as an int. The caller passes ctypes objects of the
+    exact C types (arrays, ``c_size_t``, ``c_double``, ``byref``): converting each argument
+    through ``argtypes`` costs about 1 us per call, more than a native FMU's work."""
+    cache = inst.bare
+    component = inst.slave.component
+    if cache.get("") is None or cache[""].value != component:
+        cache.clear()
+        cache[""] = ctypes.c_void_p(component)
+    function = cache.get(name)
+    if function is None:
+        function = inst.slave.dll[name]  # a new function pointer, not fmpy's attribute
+        function.restype = ctypes.c_int
+        cache[name] = function
+    return cache[""], function
+
+
+def raw_call(inst: Instance, kind: str, type_: str, vrs: list[int]) -> tuple:
+    """(function name, component, function, value references, count, buffer) of
+    fmi2<kind><type_> on fixed value references, preallocated for :func:`bare` calls."""
+    name = f"fmi2{kind}{type_}"
+    component, function = bare(inst, name)
+    n = len(vrs)
+    return (name, component, function, (ctypes.c_uint * n)(*vrs), ctypes.c_size_t(n),
+            (_CTYPES[type_] * n)())
+
+
 def raw_accessor(inst: Instance, kind: str, type_: str, vrs: list[int]):
     """fmi2Get<type> (``kind`` "Get") or fmi2Set<type> ("Set") of fixed value references,
-    straight through ctypes with preallocated arrays: fmpy's ``getReal`` allocates both arrays
-    and its call wrapper inspects the log state on every call (about 10 us per call here).
+    straight through ctypes with preallocated arrays (:func:`raw_call`): fmpy's ``getReal``
+    allocates both arrays, converts every argument and inspects the log state on every call.
     A status above fmi2Warning raises FMICallException, as fmpy does."""
-    name = f"fmi2{kind}{type_}"
-    function = inst.slave._functions[name]
-    n = len(vrs)
-    refs = (ctypes.c_uint * n)(*vrs)
-    buffer = (_CTYPES[type_] * n)()
-    component = inst.slave.component
+    name, component, function, refs, n, buffer = raw_call(inst, kind, type_, vrs)
 
     if kind == "Get":
         def get() -> list:

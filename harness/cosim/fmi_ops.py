@@ -6,9 +6,7 @@ from __future__ import annotations
 import ctypes
 from typing import Any
 
-from fmpy.fmi1 import FMICallException
-
-from harness.cosim.fmi import GETTERS, SETTERS, Guard, Instance, raw_accessor
+from harness.cosim.fmi import GETTERS, SETTERS, Guard, Instance, bare, fail, raw_accessor
 
 
 class StepOps:
@@ -43,70 +41,80 @@ class StepOps:
         with entry[1]:
             entry[0](values)
 
-    def _raw(self, inst: Instance) -> tuple:
-        """(component, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate, fmi2DoStep) raw
-        ctypes functions of ``inst`` (fmpy's wrappers cost a few us per call)."""
-        raw = self._fast.get(("raw", inst.name))
-        if raw is None or raw[0] != inst.slave.component:
-            f = inst.slave._functions
-            raw = (inst.slave.component, f["fmi2GetFMUstate"], f["fmi2SetFMUstate"],
-                   f["fmi2FreeFMUstate"], f["fmi2DoStep"])
-            self._fast[("raw", inst.name)] = raw
-        return raw
+    def _raws(self) -> dict[str, tuple]:
+        """Instance name -> (instance, component, fmi2GetFMUstate, fmi2SetFMUstate,
+        fmi2FreeFMUstate, fmi2DoStep), the functions argtype-free (:func:`bare`; fmpy's
+        wrappers and argument conversion cost a few us per call)."""
+        raws = self._fast.get("raws")
+        if raws is None:
+            raws = {}
+            for inst in self._instances.values():
+                component, get = bare(inst, "fmi2GetFMUstate")
+                raws[inst.name] = (inst, component, get, bare(inst, "fmi2SetFMUstate")[1],
+                                   bare(inst, "fmi2FreeFMUstate")[1], bare(inst, "fmi2DoStep")[1])
+            self._fast["raws"] = raws
+        return raws
 
     def save_states(self) -> list[tuple[Instance, Any]]:
         states = []
-        for inst in self._instances.values():
-            self._calls += 1
-            with Guard(inst, "fmi2GetFMUstate"):
-                if self.fmi_call_logger is not None:
+        if self.fmi_call_logger is not None:
+            for inst in self._instances.values():
+                self._calls += 1
+                with Guard(inst, "fmi2GetFMUstate"):
                     states.append((inst, inst.slave.getFMUstate()))
-                    continue
-                component, get, _, _, _ = self._raw(inst)
-                state = ctypes.c_void_p()
-                _check(get(component, ctypes.byref(state)), "fmi2GetFMUstate")
-                states.append((inst, state))
+            return states
+        for inst, component, get, _, _, _ in self._raws().values():
+            self._calls += 1
+            state = ctypes.c_void_p()
+            status = get(component, ctypes.byref(state))
+            if status > 1:
+                fail(inst, "fmi2GetFMUstate", status)
+            states.append((inst, state))
         return states
 
     def restore_states(self, states: list[tuple[Instance, Any]], inputs: bool) -> None:
         """Restore every FMU; with ``inputs`` also re-set the inputs of the step start (a
         sweep at the rejected point changed them; an FMU state need not hold inputs)."""
-        for inst, state in states:
-            self._calls += 1
-            with Guard(inst, "fmi2SetFMUstate"):
-                if self.fmi_call_logger is not None:
+        if self.fmi_call_logger is not None:
+            for inst, state in states:
+                self._calls += 1
+                with Guard(inst, "fmi2SetFMUstate"):
                     inst.slave.setFMUstate(state)
-                else:
-                    component, _, set_, _, _ = self._raw(inst)
-                    _check(set_(component, state), "fmi2SetFMUstate")
+        else:
+            raws = self._raws()
+            for inst, state in states:
+                self._calls += 1
+                _, component, _, set_, _, _ = raws[inst.name]
+                status = set_(component, state)
+                if status > 1:
+                    fail(inst, "fmi2SetFMUstate", status)
         if inputs:
             for inst, type_, vrs, values in self._last_sets:
                 self._set(inst, type_, vrs, values)
 
     def free_states(self, states: list[tuple[Instance, Any]]) -> None:
+        raws = None if self.fmi_call_logger is not None else self._raws()
         for inst, state in states:
             self._calls += 1
             try:
-                if self.fmi_call_logger is not None:
+                if raws is None:
                     inst.slave.freeFMUstate(state)
                 else:
-                    component, _, _, free, _ = self._raw(inst)
+                    _, component, _, _, free, _ = raws[inst.name]
                     free(component, ctypes.byref(state))
             except Exception:
                 pass
 
     def do_step(self, t: float, h: float) -> None:
-        for inst in self._instances.values():
-            self._calls += 1
-            with Guard(inst, "fmi2DoStep"):
-                if self.fmi_call_logger is not None:
+        if self.fmi_call_logger is not None:
+            for inst in self._instances.values():
+                self._calls += 1
+                with Guard(inst, "fmi2DoStep"):
                     inst.slave.doStep(t, h, noSetFMUStatePriorToCurrentPoint=False)
-                else:
-                    component, _, _, _, step = self._raw(inst)
-                    _check(step(component, t, h, 0), "fmi2DoStep")
-
-
-def _check(status: int, function: str) -> None:
-    """fmpy's rule: a status above fmi2Warning is an FMICallException."""
-    if status > 1:
-        raise FMICallException(function=function, status=status)
+            return
+        t_c, h_c = ctypes.c_double(t), ctypes.c_double(h)
+        for inst, component, _, _, _, step in self._raws().values():
+            self._calls += 1
+            status = step(component, t_c, h_c, 0)  # noSetFMUStatePriorToCurrentPoint false
+            if status > 1:
+                fail(inst, "fmi2DoStep", status)

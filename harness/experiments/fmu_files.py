@@ -1,5 +1,6 @@
 """The toolkit's FMU files for the experiments: built once per process or taken from a
-folder (:func:`ensure_fmus`), and which inputs and outputs a file has (:func:`has_input`,
+folder (:func:`ensure_fmus`; a folder of the native build, :func:`fmu_dir_kind`, must hold
+all three native FMUs), and which inputs and outputs a file has (:func:`has_input`,
 :func:`has_output`: FMUs of an older interface lack the newer variables)."""
 from __future__ import annotations
 
@@ -41,11 +42,48 @@ def ensure_fmus(fmu_dir: str | Path | Mapping[str, Path] | None = None) -> dict[
     folder = Path(fmu_dir)
     if folder.exists() and not folder.is_dir():
         raise ParameterError("fmu_dir", str(fmu_dir), "a folder")
+    if fmu_dir_kind(folder) == "native":  # complete (checked): nothing to build
+        return {name: folder / f"{name}.fmu" for name in FMU_FILES}
     paths = {}
     for name in FMU_FILES:
         path = folder / f"{name}.fmu"
         paths[name] = path if path.is_file() else Path(build_fmu(name, folder))
     return paths
+
+
+def fmu_dir_kind(fmu_dir: str | Path, parameter: str = "fmu_dir") -> str:
+    """``"native"`` if the folder holds the native build's AbuBall, SpeedController and
+    Staircase (:func:`fmus.native_build.build_native_fmus`), else ``"python"`` (the default
+    pythonfmu FMUs, missing ones built there by :func:`ensure_fmus`).
+
+    Raises:
+        ParameterError (named ``parameter``): the folder has a native FMU beside a Python one
+            or lacks one of the three native FMUs (a Python build would fill the gap: the
+            co-simulation would mix the two builds).
+    """
+    folder = Path(fmu_dir)
+    present = {name: folder / f"{name}.fmu" for name in FMU_FILES
+               if (folder / f"{name}.fmu").is_file()}
+    if not present:
+        return "python"
+    from fmus.native_build import is_native_fmu
+
+    native = [name for name, path in present.items() if is_native_fmu(path)]
+    if not native:
+        return "python"
+    other = [f"{name}.fmu" for name in present if name not in native]
+    if other:
+        raise ParameterError(parameter, str(fmu_dir), (
+            f"a folder of one build, but {', '.join(f'{n}.fmu' for n in native)} "
+            f"{'is' if len(native) == 1 else 'are'} native and {', '.join(other)} "
+            f"{'is' if len(other) == 1 else 'are'} not: rebuild it with 'abu build-fmus "
+            f"--native --out DIR' (or without --native for the Python FMUs)"))
+    missing = [f"{name}.fmu" for name in FMU_FILES if name not in present]
+    if missing:
+        raise ParameterError(parameter, str(fmu_dir), (
+            f"all three native FMUs, but {', '.join(missing)} "
+            f"{'is' if len(missing) == 1 else 'are'} missing: rebuild them with 'abu build-fmus --native --out DIR'"))
+    return "native"
 
 
 _CAUSALITIES: dict[tuple[str, int], dict[str, str]] = {}
