@@ -12,7 +12,11 @@ debug logging, re-initialisations (reset, setup, enter, exit in a row) after a p
 set to -1 (refused at fmi2ExitInitializationMode) or back to its start value, and an
 injected failure of the Python runtime that makes the C layer latch fmi2Fatal). Asserted:
 no child dies of a signal or exits abnormally; every status is a valid fmi2Status; every
-non-OK status comes with a logged message; after fmi2Fatal every call returns fmi2Error
+non-OK status comes with a logged message; every call drawn invalid (NULL vr or value arrays
+with nvr > 0, nvr larger than the vr array, unknown or wrongly typed value references,
+non-finite or negative steps, non-finite times, an inverted or non-finite experiment, unknown
+state pointers, junk serialized states) is refused: fmi2Error or worse AND a logged message
+(removing the native layer's NULL-array check fails it: 10 of 100 AbuBall sequences); after fmi2Fatal every call returns fmi2Error
 (with a message) and fmi2FreeFMUstate / fmi2FreeInstance still free.
 """
 from __future__ import annotations
@@ -52,6 +56,15 @@ def load(name: str, fmu_path: str, root: str):
 NATIVE_FAULT = None
 
 
+#: Why the call being made is invalid (set by the action that draws it; None: not known
+#: to be invalid). An invalid call must be refused: fmi2Error or worse and a logged message.
+INVALID: dict = {"why": None}
+
+
+def invalid(why: str) -> None:
+    INVALID["why"] = why
+
+
 class Outcome(Exception):
     """A broken promise found inside a child."""
 
@@ -84,12 +97,41 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
     def pick_vrs(kind: str) -> list[int]:
         pool = by_type[kind] or all_vrs
         n = rng.choice([0, 1, 1, 2, 3])
-        return [rng.choice(pool + all_vrs + [max(all_vrs) + 1, 9999, 2**32 - 1])
-                if rng.random() < 0.3 else rng.choice(pool) for _ in range(n)]
+        vrs = [rng.choice(pool + all_vrs + [max(all_vrs) + 1, 9999, 2**32 - 1])
+               if rng.random() < 0.3 else rng.choice(pool) for _ in range(n)]
+        unknown = [vr for vr in vrs if vr not in by_type[kind]]
+        if unknown:
+            invalid(f"value reference {unknown[0]} is no {kind} variable")
+        return vrs
+
+    def raw_array(kind: str):
+        """A get or set of ``kind`` with a NULL vr or value array and nvr > 0, or with nvr
+        larger than the vr array (what lies past its end: an unknown value reference, here
+        0xFFFFFFFF; the value buffer is long enough, so the FMU cannot corrupt the host)."""
+        ctype = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int,
+                 "String": ctypes.c_char_p}[kind]
+        known = by_type[kind] or [0]
+        short = rng.randrange(0, 3)
+        nvr = short + rng.randrange(1, 4)
+        vr = (ctypes.c_uint * nvr)(*([rng.choice(known) for _ in range(short)]
+                                     + [2**32 - 1] * (nvr - short)))
+        values = (ctype * nvr)()
+        if kind == "String":
+            values = (ctype * nvr)(*([b"x"] * nvr))
+        how = rng.randrange(3)
+        if how == 0:
+            vr, why = None, f"vr is NULL with nvr = {nvr}"
+        elif how == 1:
+            values, why = None, f"the value array is NULL with nvr = {nvr}"
+        else:
+            why = f"nvr = {nvr} is larger than the vr array ({short} references)"
+        invalid(why)
+        getattr(fmu, f"fmi2{rng.choice(['Get', 'Set'])}{kind}")(fmu.component, vr, nvr, values)
 
     def call(what, fn):
         nonlocal fatal
         before = len(messages)
+        INVALID["why"] = None
         try:
             fn()
             status = 0
@@ -100,6 +142,12 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
             raise Outcome(f"{what}: invalid status {status}")
         if status != 0 and len(messages) == before:
             raise Outcome(f"{what}: status {status} without a logged message")
+        why = INVALID["why"]
+        if why is not None:  # an invalid call: refused (fmi2Error or worse) with a message
+            counts["invalid"] += 1
+            if status < 3:
+                raise Outcome(f"{what} ({why}): accepted with status {status}; expected "
+                              "fmi2Error or fmi2Fatal")
         if fatal and status != 3 and what != "freeFMUstate":  # freeing still frees
             raise Outcome(f"{what}: status {status} after fmi2Fatal (expected fmi2Error)")
         if status == 4:
@@ -116,6 +164,8 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
                 t = size.value
             except FMICallException:
                 t = 0.0
+        if not (math.isfinite(t) and math.isfinite(h)) or h < 0:
+            invalid(f"doStep at t = {t} with h = {h}")
         fmu.doStep(t, h)
 
     def mutated_blob() -> bytes:
@@ -129,8 +179,12 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
             elif how == 2:
                 blob = bytearray(bytes(blob).replace(b'"time": ', b'"time": NaN, "x": ', 1))
             return bytes(blob)
-        return rng.choice([b"", b"garbage", b"{}", b'{"format": "abufmu-state-1"}', b"[1, 2",
-                           os.urandom(rng.randrange(1, 64)), b'{"format": "abufmu-state-1", '
+        junk = rng.choice([b"", b"garbage", b"{}", b'{"format": "abufmu-state-1"}', b"[1, 2",
+                           os.urandom(rng.randrange(1, 64))])
+        if rng.random() < 0.7:
+            invalid(f"a serialized state that is no state ({junk[:20]!r})")
+            return junk
+        return rng.choice([junk, b'{"format": "abufmu-state-1", '
                            b'"model": "AbuBall", "phase": "step mode", "time": 0.0, '
                            b'"last_successful_time": 0.0, "slave": {"m": -1}}'])
 
@@ -149,11 +203,22 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
                                      else lambda self, vrs: "malformed")
         fmu.getReal([by_type["Real"][0]])
 
+    def setup_experiment():
+        tolerance = rng.choice([None, 1e-6, -1.0, math.nan])
+        start = rng.choice([0.0, 0.0, 1.0, -1.0, math.nan, math.inf])
+        stop = rng.choice([None, 2.0, -5.0, math.nan])
+        if not math.isfinite(start) or (stop is not None and not stop >= start):
+            invalid(f"setupExperiment from {start} to {stop}")
+        fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
+
+    def unknown_state(fn, what):
+        invalid(f"{what} of a pointer that is no state of this instance")
+        return fn()
+
     actions = [
-        ("setupExperiment", 3, lambda: fmu.setupExperiment(
-            tolerance=rng.choice([None, 1e-6, -1.0, math.nan]),
-            startTime=rng.choice([0.0, 0.0, 1.0, -1.0, math.nan, math.inf]),
-            stopTime=rng.choice([None, 2.0, -5.0, math.nan]))),
+        ("setupExperiment", 3, setup_experiment),
+        ("nullOrShortArray", 4, lambda: raw_array(rng.choice(
+            [k for k in ("Real", "Integer", "Boolean", "String") if by_type[k]]))),
         ("enterInitializationMode", 3, fmu.enterInitializationMode),
         ("exitInitializationMode", 3, fmu.exitInitializationMode),
         ("terminate", 1, fmu.terminate),
@@ -172,12 +237,15 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
             pick_vrs("String"))),
         ("doStep", 10, do_step),
         ("getFMUstate", 3, lambda: states.append(fmu.getFMUstate())),
-        ("setFMUstate", 3, lambda: fmu.setFMUstate(rng.choice(states) if states and rng.random() < 0.8
-                                                    else fmi2FMUstate(rng.choice([1, 0xDEADBEEF])))),
-        ("freeFMUstate", 1, lambda: fmu.freeFMUstate(states.pop(rng.randrange(len(states)))
-                                                      if states else fmi2FMUstate(0x1234))),
-        ("serializeFMUstate", 2, lambda: blobs.append(fmu.serializeFMUstate(
-            rng.choice(states) if states else fmi2FMUstate(0x4321)))),
+        ("setFMUstate", 3, lambda: fmu.setFMUstate(rng.choice(states)) if states and
+         rng.random() < 0.8 else unknown_state(lambda: fmu.setFMUstate(
+             fmi2FMUstate(rng.choice([1, 0xDEADBEEF]))), "setFMUstate")),
+        ("freeFMUstate", 1, lambda: fmu.freeFMUstate(states.pop(rng.randrange(len(states))))
+         if states else unknown_state(lambda: fmu.freeFMUstate(fmi2FMUstate(0x1234)),
+                                      "freeFMUstate")),
+        ("serializeFMUstate", 2, lambda: blobs.append(fmu.serializeFMUstate(rng.choice(states)))
+         if states else unknown_state(lambda: fmu.serializeFMUstate(fmi2FMUstate(0x4321)),
+                                      "serializeFMUstate")),
         ("deSerializeFMUstate", 3, lambda: (lambda blob: states.append(
             fmu.deSerializeFMUstate(blob)))(rng.choice(blobs) if blobs and rng.random() < 0.3
                                             else mutated_blob())),
@@ -203,12 +271,13 @@ def run_sequence(fmu: FMU2Slave, md, unzipdir: str, seed: int) -> dict:
         for step in (cycle if name == "reinitialize" else [name]):
             call(step, table[step])
     fmu.fmi2FreeInstance(fmu.component)  # freeing always frees (also after fmi2Fatal)
-    return {"counts": dict(counts), "fatal": fatal}
+    invalid_calls = counts.pop("invalid", 0)
+    return {"counts": dict(counts), "fatal": fatal, "invalid": invalid_calls}
 
 
 def fuzz(fmu: FMU2Slave, md, unzipdir: str, first: int, count: int) -> dict:
     """Run sequences first..first+count-1, each in a forked child; aggregate the outcomes."""
-    totals, fatal_runs, problems = Counter(), 0, []
+    totals, fatal_runs, problems, invalid_calls = Counter(), 0, [], 0
     for seed in range(first, first + count):
         read_end, write_end = os.pipe()
         pid = os.fork()
@@ -239,8 +308,9 @@ def fuzz(fmu: FMU2Slave, md, unzipdir: str, first: int, count: int) -> dict:
             continue
         totals.update({int(k): v for k, v in result["counts"].items()})
         fatal_runs += result["fatal"]
+        invalid_calls += result["invalid"]
     return {"sequences": count, "problems": problems, "totals": dict(totals),
-            "fatal_runs": fatal_runs}
+            "fatal_runs": fatal_runs, "invalid_calls": invalid_calls}
 
 
 if __name__ == "__main__":

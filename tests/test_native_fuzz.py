@@ -33,4 +33,8 @@ def test_random_call_sequences_never_crash_a_native_fmu(native_fmu_dir, tmp_path
           f"OK/Warning/Discard/Error/Fatal = {[totals.get(s, 0) for s in range(5)]}; "
           f"{result['fatal_runs']} sequences latched fmi2Fatal")
     assert not problems, problems[:10]
+    print(f"  {result['invalid_calls']} invalid calls (NULL or too-short arrays, unknown value "
+          "references, non-finite steps and times, unknown state pointers, junk states), "
+          "each refused with fmi2Error or worse and a logged message")
     assert totals.get(0) and totals.get(3) and result["fatal_runs"] > 0  # all paths reached
+    assert result["invalid_calls"] > SEQUENCES  # the invalid calls were made

@@ -46,3 +46,54 @@ def test_sweep_rejects_an_empty_grid_and_bad_workers(tmp_path, capsys):
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert "--workers" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_journal_cuts_a_torn_line_dedupes_and_refuses_another_sweep(tmp_path):
+    from harness.experiments.sweep_journal import Journal, JournalError
+
+    path = tmp_path / "s.csv.journal"
+    j = Journal(path, "abc", 3)
+    assert j.append("k1", {"mu": 0.1, "x": None}) and not j.append("k1", {"mu": 0.2})
+    j.append("k2", {"mu": 0.1 + 0.2})
+    j.close()
+    with open(path, "ab") as f:
+        f.write(b'{"key": "k3", "ro')  # killed while writing
+    j = Journal(path, "abc", 3)
+    assert j.rows == {"k1": {"mu": 0.1, "x": None}, "k2": {"mu": 0.30000000000000004}}
+    j.append("k3", {"mu": 3.0})
+    j.close()
+    assert path.read_bytes().count(b"\n") == 4 and b'"ro\n' not in path.read_bytes()
+    with pytest.raises(JournalError, match="different settings"):
+        Journal(path, "other", 3)
+    assert Journal(path, "other", 3, discard=True).rows == {}
+
+
+def test_sweep_progress_bar_counts_runs(fmu_dir, tmp_path, capsys):
+    out = tmp_path / "sweep.csv"
+    assert main(["sweep", "--mu", "2.75e-3", "--omega0-hz", "-17", "-18", "--out", str(out),
+                 "--fmu-dir", str(fmu_dir["AbuBall"].parent), "--progress", "--te", "0.3",
+                 "--span-hz", "-2", "--tau-motor", "1e-3", "--t0", "0.1", "--tol", "1e-8"]) == 0
+    err = capsys.readouterr().err
+    assert "2/2" in err and "run" in err
+    import re
+    assert not re.search(r"\d\.\d{6,}/", err)  # no raw floats such as 0.345499.../1.35
+    assert not out.with_name("sweep.csv.journal").exists()
+
+
+def test_sweep_runs_are_abu_simulate_runs(fmu_dir, tmp_path, capsys):
+    """Each row is what ``abu simulate --json`` gives with the same options (drive-free)."""
+    import json
+    folder = str(fmu_dir["AbuBall"].parent)
+    opts = ["--te", "0.5", "--tau-motor", "2e-3", "--t0", "0.05", "--tol", "1e-8",
+            "--zeta", "0.6", "--step-hz", "1"]
+    out = tmp_path / "sweep.csv"
+    assert main(["sweep", "--mu", "2.75e-3", "--omega0-hz", "-17", "--span-hz", "-3",
+                 "--out", str(out), "--fmu-dir", folder, *opts]) == 0
+    capsys.readouterr()
+    assert main(["simulate", "--mu", "2.75e-3", "--omega0-hz", "-17", "--omega-end-hz", "-20",
+                 "--fmu-dir", folder, "--json", *opts]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    row = next(csv.DictReader(out.open()))
+    assert float(row["mu_low"]) == summary["mu_low"]
+    assert (row["mu_high"] or None) == (None if summary["mu_high"] is None
+                                        else repr(summary["mu_high"]))

@@ -190,30 +190,6 @@ def check_table41_speeds(rows: Iterable) -> None:
                                  f"is at most {MAX_SPEED_HZ:g} Hz (it needs {row.omega0_hz} Hz)")
 
 
-def check_sweep(args: argparse.Namespace) -> None:
-    """Options of ``abu sweep``."""
-    for mu in args.mu:
-        finite("--mu", mu)
-        if not 0 < mu <= 2.0:
-            raise ParameterError("--mu", mu, "friction coefficients in (0, 2]")
-    for w in args.omega0_hz:
-        _speed("--omega0-hz", w)
-        if w == 0:
-            raise ParameterError("--omega0-hz", w, "non-zero speeds [Hz]")
-    span = _speed("--span-hz", args.span_hz)
-    for w in args.omega0_hz:
-        _speed("--span-hz", w + span)
-    count_limit("--span-hz", span, abs(span), MAX_SETPOINT_STEPS, "1 Hz setpoint steps",
-                "each forces a communication point")
-    te = positive("--te", args.te, "s")
-    in_range("--te", te, 0.0, MAX_SIM_TIME_S, "s", "simulated time; the report's te is 1 s")
-    count_limit("--te", te, (te + 0.55) / 1e-3, MAX_COMM_STEPS, "communication steps",
-                "about 0.4 ms of computing each")
-    _check_loop_step(args, 1e-3, te + 0.55)
-    in_range("--workers", args.workers, 1, 256, "", "local worker processes")
-    check_scheduler_address(getattr(args, "scheduler", None))
-
-
 #: Transports of a Dask scheduler address (distributed.comm).
 SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 _HOST = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]{0,252}[A-Za-z0-9])?)")

@@ -1,6 +1,7 @@
 """The ``abu`` command line: one parser, one module per group of commands.
 
-* :mod:`abu.cli.simulate`: ``build-fmus``, ``simulate``, ``table41``, ``sweep``;
+* :mod:`abu.cli.simulate`: ``build-fmus``, ``simulate``, ``table41``;
+* :mod:`abu.cli.sweep`: ``sweep``;
 * :mod:`abu.cli.export`: ``export-ssp``;
 * :mod:`abu.cli.measure`: ``track``, ``measure``, ``measure-summary``;
 * :mod:`abu.cli.render`: ``render``; :mod:`abu.cli.camera`: ``calibrate-camera``;
@@ -44,7 +45,7 @@ class _VersionAction(argparse.Action):
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``abu`` argument parser with every subcommand."""
-    from abu.cli import camera, demo, export, measure, plan, render, simulate
+    from abu.cli import camera, demo, export, measure, plan, render, simulate, sweep
 
     parser = AbuArgumentParser(
         prog="abu", description="Static friction of a ball in an automatic balancing unit: "
@@ -53,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="show the traceback of an unexpected error (any position)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (simulate, demo, measure, render, camera, export, plan):
+    for module in (simulate, sweep, demo, measure, render, camera, export, plan):
         module.register(sub)
     return parser
 

@@ -1,5 +1,5 @@
 """Co-simulation commands: ``build-fmus``, ``simulate`` (its files and text:
-:mod:`harness.experiments.simulate_output`), ``table41`` and ``sweep``."""
+:mod:`harness.experiments.simulate_output`) and ``table41`` (``sweep``: :mod:`abu.cli.sweep`)."""
 from __future__ import annotations
 
 import argparse
@@ -9,15 +9,14 @@ import time
 from pathlib import Path
 
 from abu_model.errors import ParameterError
-from abu_model.params import PlantParams
 
-from abu.cli.checks_cosim import (check_fmu_dir, check_ramp, check_staircase, check_sweep,
+from abu.cli.checks_cosim import (check_fmu_dir, check_ramp, check_staircase,
                                   check_table41, check_table41_speeds)
 from abu.cli.common import add_overwrite
-from abu.cli.options_cosim import (HZ, add_controller_options, add_plant_options,
-                                   add_staircase_options, finite, ramp_from_args, renamed,
+from abu.cli.options_cosim import (add_controller_options, add_plant_options,
+                                   add_staircase_options, ramp_from_args, renamed,
                                    staircase_from_args)
-from abu.cli.output_tx import output_file, output_folder
+from abu.cli.output_tx import output_folder
 from harness.experiments.simulate_output import describe, tagged_summary, write_outputs
 
 FMU_NAMES = ("AbuBall", "SpeedController", "Staircase")
@@ -28,7 +27,7 @@ TABLE41_UNITS = {"mu": "-", "omega0_hz": "Hz", "threshold_hz": "Hz", "jump_rad_s
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``build-fmus``, ``simulate``, ``table41`` and ``sweep`` to the subcommands."""
+    """Add ``build-fmus``, ``simulate`` and ``table41`` to the subcommands."""
     p = sub.add_parser("build-fmus", help="build AbuBall.fmu, SpeedController.fmu, Staircase.fmu",
                        description="Build the three FMI 2.0 co-simulation FMUs: pythonfmu "
                                    "(default) or, with --native, compiled C that needs no "
@@ -85,30 +84,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built if missing)")
     p.add_argument("--json", action="store_true", help="print a JSON list on stdout")
     p.set_defaults(func=cmd_table41)
-
-    p = sub.add_parser("sweep", help="staircase co-simulations over a grid of mu and omega0 "
-                                     "on a Dask cluster",
-                       description="Run the staircase experiment for every (mu, omega0) pair, one "
-                                   "co-simulation per worker process (local cluster, or a running "
-                                   "Dask scheduler), and write the bounds as CSV.")
-    p.add_argument("--mu", type=float, nargs="+", required=True, help="friction coefficients [-]")
-    p.add_argument("--omega0-hz", type=float, nargs="+", required=True,
-                   help="initial speeds [Hz]; the staircase spans --span-hz from each")
-    p.add_argument("--span-hz", type=float, default=-5.0,
-                   help="omega_end - omega0 [Hz] (default -5, the report's)")
-    p.add_argument("--te", type=float, default=1.0,
-                   help="duration of the inclined sine [s] (default 1)")
-    p.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead")
-    add_controller_options(p)
-    p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    p.add_argument("--scheduler", default=None,
-                   help="address of a running Dask scheduler (default: start a local cluster)")
-    p.add_argument("--fmu-dir", default=None, help="folder with the FMUs, readable by every worker "
-                                                   "(default: built into --out's folder)")
-    p.add_argument("--out", required=True, help="CSV file to write")
-    add_overwrite(p)
-    p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
-    p.set_defaults(func=cmd_sweep)
 
 
 
@@ -183,43 +158,4 @@ def cmd_table41(args: argparse.Namespace) -> int:
         print(f"{r.mu:>12.4g} {r.omega0_hz:>12d} {r.threshold_hz:>15.4f} {r.jump_rad_s2:>15.4f} "
               f"{'' if report is None else report:>12} {checked:>8}")
     print(f"wall time {time.perf_counter() - started:.2f} s")
-    return 0
-
-
-def cmd_sweep(args: argparse.Namespace) -> int:
-    from fmus.build import build_fmus
-
-    from harness.experiments.fmu_files import fmu_dir_kind
-    from harness.experiments.staircase import StaircaseExperiment
-    from harness.experiments.sweep import run_sweep, sweep_grid, write_sweep_csv
-
-    if args.workers < 1:
-        raise ParameterError("--workers", args.workers, "at least 1 worker process")
-    check_sweep(args)
-    check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
-    span = finite("--span-hz", args.span_hz)
-    if abs(span) < 1.0:
-        raise ParameterError("--span-hz", span, "a span of at least one 1 Hz step")
-    out = Path(args.out)
-    fmu_dir = Path(args.fmu_dir) if args.fmu_dir else out.parent / "fmus"
-    points = sweep_grid(args.mu, args.omega0_hz)
-    w0 = points[0].omega0_hz * HZ
-    try:
-        base = StaircaseExperiment(PlantParams(), w0, w0 + span * HZ, te=args.te,
-                                   rounding=args.rounding, theta_ref_mode=args.theta_ref,
-                                   zeta=args.zeta, omega_n=args.omega_n)
-    except ParameterError as exc:
-        raise renamed(exc) from None
-    with output_file(out, overwrite=args.overwrite) as tmp:  # locked before the runs
-        if not (args.fmu_dir and fmu_dir_kind(fmu_dir, "--fmu-dir") == "native"):
-            build_fmus(fmu_dir)  # (a native build is used as it is)
-        started = time.perf_counter()
-        rows = run_sweep(points, base, fmu_dir, scheduler=args.scheduler,
-                         workers=args.workers, progress=args.progress)
-        wall = time.perf_counter() - started
-        write_sweep_csv(tmp, rows)
-    bracketed = sum(r["bracketed"] for r in rows)
-    slipped = sum(r["slipped"] for r in rows)
-    print(f"{len(rows)} runs: {slipped} slipped, {bracketed} bracket mu; wrote {out} "
-          f"(wall time {wall:.2f} s)")
     return 0

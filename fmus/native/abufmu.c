@@ -582,7 +582,17 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceD
     }
 SIMPLE(fmi2EnterInitializationMode, "enter_initialization_mode")
 SIMPLE(fmi2ExitInitializationMode, "exit_initialization_mode")
-SIMPLE(fmi2Terminate, "terminate")
+/* fmi2Terminate after the host's interpreter has finalised (libcosimpy's destructors run
+ * after Python's shutdown): the instance's Python side is gone with the interpreter and there
+ * is nothing left to end, so it succeeds without a message. Every call that would need
+ * Python still refuses (enter(): fmi2Error and a logged message). */
+EXPORT fmi2Status fmi2Terminate(fmi2Component comp) {
+    Inst *inst = (Inst *)comp;
+    if (inst != NULL && is_live(inst) && !inst->fatal && !py.Py_IsInitialized()) return fmi2OK;
+    BEGIN("fmi2Terminate")
+    st = finish_owned(c, "fmi2Terminate", py.PyObject_CallMethod(c->obj, "terminate", NULL));
+    END()
+}
 SIMPLE(fmi2Reset, "reset")
 SIMPLE(fmi2CancelStep, "cancel_step")
 

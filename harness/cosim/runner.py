@@ -103,7 +103,9 @@ class Runner:
         bar = None
         if sim.progress:
             from tqdm import tqdm
-            bar = tqdm(total=sim.stop_time - sim.start_time, unit="s", leave=False)
+            bar = tqdm(total=sim.stop_time - sim.start_time, unit="s", leave=False,
+                       bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
+                                  "[{elapsed}<{remaining}]")
         try:
             while sim.stop_time - t > sim.event_tol:
                 target, n_grid = self._propose(t, n_grid, h)
