@@ -97,3 +97,27 @@ def test_sweep_runs_are_abu_simulate_runs(fmu_dir, tmp_path, capsys):
     assert float(row["mu_low"]) == summary["mu_low"]
     assert (row["mu_high"] or None) == (None if summary["mu_high"] is None
                                         else repr(summary["mu_high"]))
+
+
+def test_a_sweep_killed_after_its_csv_landed_finishes_when_run_again(fmu_dir, tmp_path,
+                                                                     capsys, monkeypatch):
+    """The last moment of a sweep: the CSV is in place, its journal not yet removed (a kill
+    there). The same command again must finish (same CSV, journal gone), not refuse the CSV as
+    another run's; a different command must still refuse it."""
+    from harness.experiments import sweep_journal
+
+    folder = fmu_dir["AbuBall"].parent
+    out = tmp_path / "sweep.csv"
+    argv = ["sweep", "--mu", "2.75e-3", "--omega0-hz", "-17", "-18", "--out", str(out),
+            "--workers", "1", "--fmu-dir", str(folder)]
+    with monkeypatch.context() as m:  # the journal survives, as after a kill at that moment
+        m.setattr(sweep_journal.Journal, "remove", lambda self: None)
+        assert main(argv) == 0
+    first = out.read_text()
+    journal = sweep_journal.journal_path(out.absolute())
+    assert journal.exists()
+    assert main(argv) == 0
+    assert out.read_text() == first and not journal.exists()
+    capsys.readouterr()
+    assert main(argv[:2] + ["2e-3"] + argv[3:]) == 2  # another sweep: the CSV is not its own
+    assert "already holds results" in capsys.readouterr().err

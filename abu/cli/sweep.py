@@ -118,7 +118,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from abu.cli.plan import apply_drive_to_args
     from harness.experiments.sweep import connect, run_tasks
     from harness.experiments.sweep_journal import (COLUMNS, Journal, journal_path,
-                                                   settings_hash, write_sweep_csv)
+                                                   journal_settings, settings_hash,
+                                                   write_sweep_csv)
 
     if not 1 <= args.workers <= 256:
         raise ParameterError("--workers", args.workers, "1 to 256 local worker processes")
@@ -132,7 +133,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         if args.scheduler is not None:  # fail fast, before anything is locked or built
             client, cluster = connect(args.scheduler)
-        with output_file(out, overwrite=args.overwrite) as tmp:  # locked for the whole sweep
+        # a run of this very command killed after its CSV landed, before its journal went:
+        # the CSV is this sweep's own, so finishing it again may replace it
+        finishing = out.is_file() and journal_settings(journal_path(out.absolute())) == digest
+        with output_file(out, overwrite=args.overwrite or finishing) as tmp:  # locked
             journal = Journal(journal_path(out.absolute()), digest, len(tasks),
                               discard=args.overwrite)
             try:

@@ -65,6 +65,20 @@ def settings_hash(tasks: Iterable[tuple[str, Any]]) -> str:
     return digest.hexdigest()
 
 
+def journal_settings(path: Path) -> str | None:
+    """The settings hash in the header of the journal at ``path`` (None: no such journal)."""
+    try:
+        with open(path, "rb") as fh:
+            header = json.loads(fh.readline())
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(header, dict) and header.get("kind") == KIND
+            and header.get("format_version") == FORMAT_VERSION):
+        return None
+    found = header.get("settings_sha256")
+    return found if isinstance(found, str) else None
+
+
 class Journal:
     """An open journal: the rows already there (``rows``, by key) and :meth:`append`."""
 
