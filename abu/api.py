@@ -83,13 +83,14 @@ class SimulationResult:
         """First slip instant [s] (None: no slip)."""
         return self.summary.get("t_slip")
 
-    def write(self, out_dir: str | Path) -> list[Path]:
-        """``result.csv``, ``summary.json`` and the plots into ``out_dir`` (created)."""
+    def write(self, out_dir: str | Path, figure_format: str = "png") -> list[Path]:
+        """``result.csv``, ``summary.json`` and the figures (png, pdf or svg) into ``out_dir``
+        (created)."""
         from harness.experiments.simulate_output import write_outputs
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        return write_outputs(self.result, out)
+        return write_outputs(self.result, out, figure_format)
 
 
 def simulate_staircase(*, mu: float = 2.75e-3, mu_d: float | None = None,

@@ -356,9 +356,12 @@ def kinematics_csv_text(table: dict[str, np.ndarray]) -> str:
 
 
 def write_measurement(result: MeasureResult, out_dir: str | Path, *,
-                      plots: bool = True) -> list[Path]:
-    """Write ``tracks.csv``, ``kinematics.csv``, the figures and ``summary.json`` into
-    ``out_dir`` (an existing folder; each file atomically, summary.json last)."""
+                      plots: bool = True, figure_format: str = "png") -> list[Path]:
+    """Write ``tracks.csv``, ``kinematics.csv``, the figures (``beta`` and ``kinematics``,
+    ``figure_format`` png, pdf or svg) and ``summary.json`` into ``out_dir`` (an existing
+    folder; each file atomically, summary.json last)."""
+    from abu_model.figure_files import check_figure_format
+    figure_format = check_figure_format(figure_format)
     out = Path(out_dir)
     t = result.tracks
     theta, beta = result.table["theta_rad"], result.table["beta_rad"]
@@ -370,7 +373,7 @@ def write_measurement(result: MeasureResult, out_dir: str | Path, *,
     atomic_write_text(written[1], table_text)
     if plots:
         from measurement.report.plots import plot_analysis  # matplotlib only when plotting
-        written += plot_analysis(result.table, result.summary, out)
+        written += plot_analysis(result.table, result.summary, out, figure_format)
     atomic_write_text(out / "summary.json", summary_text)
     return written + [out / "summary.json"]
 

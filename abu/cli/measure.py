@@ -21,7 +21,8 @@ from pathlib import Path
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import AbuError, ParameterError
 from abu_model.json_text import dumps
-from abu.cli.common import MAX_BINS, add_overwrite, in_range, integer_range, log as _log
+from abu.cli.common import (MAX_BINS, add_figure_format, add_overwrite, in_range, integer_range,
+                            log as _log)
 from abu.cli.output_tx import check_not_inside, output_folder
 
 from abu.cli.checks_measure import check_analysis_options, check_tracking_options
@@ -130,7 +131,8 @@ def cmd_measure(args: argparse.Namespace) -> int:
             result = measure_recording(args.input, fps_hz=fps_opt, tracking=settings,
                                        log=lambda text: _log(args, text), warn=_warn,
                                        **common)
-        write_measurement(result, tmp, plots=not args.no_plots)
+        write_measurement(result, tmp, plots=not args.no_plots,
+                          figure_format=args.figure_format)
     if args.json:
         sys.stdout.write(dumps(result.summary))
     else:
@@ -153,7 +155,7 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
         result = {"kind": COMBINED_KIND, "format_version": SUMMARY_VERSION,
                   **combine_summaries(intervals, bins=args.bins)}
         text = dumps(result)
-        plot_histogram(result, tmp / "histogram.png")
+        plot_histogram(result, tmp / "histogram", args.figure_format)
         atomic_write_text(tmp / "measure_summary.json", text)
     if args.json:
         sys.stdout.write(text)
@@ -238,7 +240,8 @@ def register(subparsers) -> None:
                    help="level of the confidence sets on mu and mu_d (default 0.95)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
-    p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
+    p.add_argument("--no-plots", action="store_true", help="do not write the figures")
+    add_figure_format(p)
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify' of the setup that "
                    "made the recording (recorded in summary.json for 'abu next')")
     from abu.cli.camera import add_camera_option
@@ -255,6 +258,7 @@ def register(subparsers) -> None:
     add_overwrite(p)
     p.add_argument("--bins", type=int, default=100, help="grid points of the histogram")
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    add_figure_format(p)
     p.set_defaults(func=cmd_measure_summary)
 
 
