@@ -13,7 +13,7 @@ Simulate (FMI co-simulation, report ch. 4)::
 Measure (camera recording -> interval on mu, report ch. 5)::
 
     api.render("twin")                      # a synthetic recording of known mu (0.03)
-    m = api.measure("twin")                 # track + analyse (frames/s default 4500)
+    m = api.measure("twin")                 # track + analyse (frame rate from frames.tif)
     m.mu_low, m.mu_high, m.status
     api.write_measurement(m, "out")         # tracks.csv, kinematics.csv, figures, summary.json
 
@@ -80,13 +80,14 @@ class SimulationResult:
     switches = summary_field("switches", "every stick/slip switch (time [s], from, to)")
     message = summary_field("message", "what the bounds mean for this run")
 
-    def write(self, out_dir: str | Path) -> list[Path]:
-        """``result.csv``, ``summary.json`` and the plots into ``out_dir`` (created)."""
+    def write(self, out_dir: str | Path, figure_format: str = "png") -> list[Path]:
+        """``result.csv``, ``summary.json`` and the figures (png, pdf or svg) into ``out_dir``
+        (created)."""
         from harness.experiments.simulate_output import write_outputs
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        return write_outputs(self.result, out)
+        return write_outputs(self.result, out, figure_format)
 
 
 def simulate_staircase(*, mu: float = 2.75e-3, mu_d: float | None = None,
@@ -158,10 +159,17 @@ def render_random(out_dir: str | Path, seed: int, *, size_px: int = 256,
     return out
 
 
-def track(recording: str | Path, *, fps_hz: float = 4500.0,
+def track(recording: str | Path, *, fps_hz: float | None = None,
           settings: TrackingSettings = TrackingSettings()) -> MarkerTracks:
-    """Marker tracks of a recording (frames folder, TIFF stack, ``.npy``, video)."""
-    return track_recording(recording, fps_hz=fps_hz, settings=settings)
+    """Marker tracks of a recording (camera file, TIFF stack, frames folder, ``.npy``, video).
+
+    Args:
+        fps_hz: frame rate [frames/s]; None: the rate the file states (Photron CIH/CIHX,
+            Phantom CINE, a TIFF of :func:`render`), and an error naming ``fps_hz`` for files
+            that state none (video, ``.npy``, frame folders, other TIFFs). Given, it overrides
+            the file's rate (a :class:`UserWarning` when they differ).
+    """
+    return track_recording(recording, fps_hz=fps_hz, settings=settings, fps_option="fps_hz")
 
 
 def measure(recording: str | Path, *, fps_hz: float | None = None,
@@ -171,14 +179,14 @@ def measure(recording: str | Path, *, fps_hz: float | None = None,
     """Track and analyse a recording: the confidence interval on mu (``abu measure``).
 
     Args:
-        fps_hz: frame rate [frames/s] (None: 4500, the report's camera).
+        fps_hz: frame rate [frames/s] (None: the rate the file states; as :func:`track`).
         l_m, d_m: radius of the ball centre's path and ball diameter [m].
         options: the analysis settings (confidence level, estimator, ...).
         camera: ``camera.json`` of ``abu calibrate-camera`` (undistorts the tracks).
     """
     cam = _camera(camera)
     return measure_recording(recording, fps_hz=fps_hz, tracking=tracking, l_m=l_m, d_m=d_m,
-                             options=options, camera=cam,
+                             options=options, camera=cam, fps_option="fps_hz",
                              camera_path=None if camera is None else str(camera))
 
 

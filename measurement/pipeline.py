@@ -30,8 +30,10 @@ from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
-#: Frame rate assumed when neither the recording nor the user gives one [frames/s] (the report's).
-DEFAULT_FPS = 4500.0
+#: The report's camera's frame rate [frames/s]: used nowhere as a default any more (a recording
+#: without a stated rate needs one given, :mod:`measurement.imaging.frame_rate`); kept for
+#: examples and messages.
+REPORT_FPS = 4500.0
 #: ``kind`` and ``format_version`` of the summary.json of ``abu measure`` (readers check them).
 SUMMARY_KIND = "abu-measure-summary"
 SUMMARY_VERSION = 1
@@ -161,29 +163,61 @@ def _check_seeds_inside(seeds: np.ndarray, width: int, height: int) -> None:
                                  f"{i + 1} is outside)")
 
 
-def track_recording(path: str | Path, *, fps_hz: float = DEFAULT_FPS,
+def _warn(text: str) -> None:
+    import warnings
+    warnings.warn(text, UserWarning, stacklevel=4)
+
+
+def _rate_info(rec, rate) -> dict[str, Any]:
+    """What summary.json / tracking.json record about the frame rate and the camera file."""
+    info: dict[str, Any] = {"fps_hz": rate.fps_hz, "fps_source": rate.source}
+    if rate.stated_hz is not None and rate.stated_hz != rate.fps_hz:
+        info["fps_stated_hz"] = rate.stated_hz
+        info["fps_stated_source"] = rec.fps_source
+    for key, value in (("bit_depth", rec.bit_depth),
+                       ("first_frame_time_s", rec.first_frame_time_s),
+                       ("video_container_fps_hz", rec.container_fps_hz)):
+        if value is not None:
+            info[key] = value
+    return info
+
+
+def track_recording(path: str | Path, *, fps_hz: float | None = None,
                     settings: TrackingSettings = TrackingSettings(),
-                    check: Callable[[int], None] | None = None,
-                    log: Callable[[str], None] | None = None) -> MarkerTracks:
+                    check: Callable[[np.ndarray, str | None], None] | None = None,
+                    log: Callable[[str], None] | None = None,
+                    warn: Callable[[str], None] | None = None,
+                    fps_option: str = "--fps") -> MarkerTracks:
     """Read the recording at ``path``, seed and track its three markers, fill short gaps.
 
     Args:
-        fps_hz: frame rate [frames/s].
-        check: called with the number of frames after reading, before tracking (input checks).
+        fps_hz: frame rate [frames/s]; None: the rate the file states (camera-file header,
+            our TIFF metadata; :mod:`measurement.imaging.frame_rate`). Given, it overrides the
+            file's (``warn`` is told when they differ).
+        check: called with the frame times [s] and where the file states its rate (None when
+            given) after reading, before tracking (input checks).
         log: receives progress messages (the markers found), or None.
+        warn: receives a one-line warning when ``fps_hz`` differs from the file's rate
+            (None: :func:`warnings.warn`).
+        fps_option: how the rate is given, for messages (``--fps``, ``fps_hz``).
 
     Raises:
-        AbuError: unreadable recording, seeds outside the frame, a marker lost for too long
-            (the message names the recording and the reasons).
+        AbuError: unreadable recording, no frame rate known, seeds outside the frame, a marker
+            lost for too long (the message names the recording and the reasons).
     """
+    from measurement.imaging.frame_rate import resolve_frame_rate
     from measurement.imaging.frames_io import read_recording
     from measurement.imaging.markers import format_seeds
     from measurement.imaging.reflections import track_markers
 
     rec = read_recording(path)
+    rate = resolve_frame_rate(rec.fps_hz, rec.fps_source, fps_hz, source=rec.source,
+                              option=fps_option, warn=_warn if warn is None else warn,
+                              container_hz=rec.container_fps_hz)
     frames = rec.frames
+    time = np.arange(len(rec)) / rate.fps_hz
     if check is not None:
-        check(len(rec))
+        check(time, None if fps_hz is not None else rate.source)
     try:
         seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
     except MarkerError as exc:
@@ -194,7 +228,6 @@ def track_recording(path: str | Path, *, fps_hz: float = DEFAULT_FPS,
                            dark=settings.dark_markers, progress=settings.progress,
                            ball_reflections=settings.ball_reflections,
                            ball_method=settings.ball_method)
-    time = np.arange(tracks.n_frames) / fps_hz
     lost = np.asarray(tracks.lost, dtype=bool)
     try:
         x = tracks_io.fill_lost(time, tracks.x, lost)
@@ -207,7 +240,7 @@ def track_recording(path: str | Path, *, fps_hz: float = DEFAULT_FPS,
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
             "roles": list(ROLES), "method": tracks.method, "window_px": tracks.window,
-            "fps_hz": fps_hz, "frames": int(time.size),
+            **_rate_info(rec, rate), "frames": int(time.size),
             "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
             "lost_reasons": tracks.lost_summary()}
     return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
@@ -221,14 +254,15 @@ def read_tracks(path: str | Path, *, fps_hz: float | None = None) -> MarkerTrack
             resampling).
     """
     table = tracks_io.read_tracks_csv(path)
-    if fps_hz is not None:
-        dt = float(np.median(np.diff(table.time)))
-        if abs(dt * fps_hz - 1.0) > 1e-3:
-            raise ParameterError("fps", fps_hz, f"the frame rate of the tracks file "
-                                 f"{path} ({1.0 / dt:.6g} frames/s from its time "
-                                 "column), or leave --fps out")
+    dt = float(np.median(np.diff(table.time)))
+    if fps_hz is not None and abs(dt * fps_hz - 1.0) > 1e-3:
+        raise ParameterError("fps", fps_hz, f"the frame rate of the tracks file "
+                             f"{path} ({1.0 / dt:.6g} frames/s from its time "
+                             "column), or leave --fps out")
+    fps = 1.0 / dt if dt > 0 else None
     return MarkerTracks(table.time, table.x, table.y, table.lost, str(path),
-                        {"source": str(path), "tracks_csv": True})
+                        {"source": str(path), "tracks_csv": True, "fps_hz": fps,
+                         "fps_source": "time column of the tracks CSV (median interval)"})
 
 
 def fill_tracks(tracks: MarkerTracks) -> MarkerTracks:
@@ -243,11 +277,17 @@ def fill_tracks(tracks: MarkerTracks) -> MarkerTracks:
 
 # ------------------------------------------------------------------------------ analysis
 
-def check_record_length(time_s: np.ndarray, source: str, options: AnalysisOptions) -> None:
-    """Frame rate, record length and trim against what the estimators need."""
-    check_sampling(time_s, source, fps_option="--fps", sg_window_s=options.sg_window_s,
+def check_record_length(time_s: np.ndarray, source: str, options: AnalysisOptions, *,
+                        fps_option: str = "--fps", rate_from: str | None = None) -> None:
+    """Frame rate, record length and trim against what the estimators need.
+
+    Args:
+        source: ``fps_option`` when the user gave the rate, else the recording or tracks file.
+        rate_from: where a recording states the rate it has (None: a time column or given).
+    """
+    check_sampling(time_s, source, fps_option=fps_option, sg_window_s=options.sg_window_s,
                    polyorder=options.sg_polyorder, estimator=options.estimator,
-                   trim_s=options.trim_s)
+                   trim_s=options.trim_s, rate_from=rate_from)
 
 
 def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
@@ -289,22 +329,27 @@ def measure_recording(path: str | Path, *, fps_hz: float | None = None,
                       l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
                       options: AnalysisOptions = AnalysisOptions(), camera=None,
                       camera_path: str | None = None, drive: dict[str, Any] | None = None,
-                      log: Callable[[str], None] | None = None) -> MeasureResult:
+                      log: Callable[[str], None] | None = None,
+                      warn: Callable[[str], None] | None = None,
+                      fps_option: str = "--fps") -> MeasureResult:
     """Track and analyse a recording (the whole of ``abu measure INPUT``).
 
     Args:
-        fps_hz: frame rate [frames/s]; None: :data:`DEFAULT_FPS`.
+        fps_hz: frame rate [frames/s]; None: the rate the file states (an error names
+            ``fps_option`` when it states none).
         Others: as :func:`track_recording` and :func:`measure_tracks`.
     """
-    fps = DEFAULT_FPS if fps_hz is None else fps_hz
-    def check(n: int) -> None:
-        if n < tracks_io.MIN_ROWS:
+    def check(time_s: np.ndarray, rate_from: str | None) -> None:
+        if time_s.size < tracks_io.MIN_ROWS:
             from measurement.imaging.recording_checks import RecordingError
+            n = time_s.size
             raise RecordingError(f"{path}: {n} frame{'s' if n != 1 else ''}; the analysis needs "
                                  f"at least {tracks_io.MIN_ROWS}")
-        check_record_length(np.arange(n) / fps, "--fps", options)
+        check_record_length(time_s, fps_option if rate_from is None else str(path), options,
+                            fps_option=fps_option, rate_from=rate_from)
 
-    tracks = track_recording(path, fps_hz=fps, settings=tracking, log=log, check=check)
+    tracks = track_recording(path, fps_hz=fps_hz, settings=tracking, log=log, warn=warn,
+                             fps_option=fps_option, check=check)
     return measure_tracks(tracks, l_m=l_m, d_m=d_m, options=options, camera=camera,
                           camera_path=camera_path, drive=drive)
 
@@ -333,9 +378,12 @@ def kinematics_csv_text(table: dict[str, np.ndarray]) -> str:
 
 
 def write_measurement(result: MeasureResult, out_dir: str | Path, *,
-                      plots: bool = True) -> list[Path]:
-    """Write ``tracks.csv``, ``kinematics.csv``, the figures and ``summary.json`` into
-    ``out_dir`` (an existing folder; each file atomically, summary.json last)."""
+                      plots: bool = True, figure_format: str = "png") -> list[Path]:
+    """Write ``tracks.csv``, ``kinematics.csv``, the figures (``beta`` and ``kinematics``,
+    ``figure_format`` png, pdf or svg) and ``summary.json`` into ``out_dir`` (an existing
+    folder; each file atomically, summary.json last)."""
+    from abu_model.figure_files import check_figure_format
+    figure_format = check_figure_format(figure_format)
     out = Path(out_dir)
     t = result.tracks
     theta, beta = result.table["theta_rad"], result.table["beta_rad"]
@@ -347,7 +395,7 @@ def write_measurement(result: MeasureResult, out_dir: str | Path, *,
     atomic_write_text(written[1], table_text)
     if plots:
         from measurement.report.plots import plot_analysis  # matplotlib only when plotting
-        written += plot_analysis(result.table, result.summary, out)
+        written += plot_analysis(result.table, result.summary, out, figure_format)
     atomic_write_text(out / "summary.json", summary_text)
     return written + [out / "summary.json"]
 

@@ -240,7 +240,10 @@ for opt, values in {"--window": ["3", "100000"], "--fps": ["0", "nan", "-1", "1e
                     "--seeds": ["1,2;3", "abc", "1000,1000;1,1;2,2"],
                     "--method": ["bogus"]}.items():
     for v in values:
-        case(["track", "{npy}", "--out", "{out}", opt, v], opt)
+        rate = [] if opt == "--fps" else ["--fps", "4500"]   # a .npy states no frame rate
+        case(["track", "{npy}", "--out", "{out}", *rate, opt, v], opt)
+case(["track", "{npy}", "--out", "{out}"], "--fps")   # ... and needs one
+case(["measure", "{npy}", "--out", "{out}"], "--fps")
 # measure: the measurement cases of the issue and more
 case(["measure", "--tracks", "{tracks_ms}", "--out", "{out}"], "tracks_ms.csv")
 case(["measure", "--tracks", "{tracks_still}", "--out", "{out}"], "tracks_still.csv")

@@ -346,7 +346,9 @@ def test_read_recording_keeps_8_bit_camera_files_mapped(tmp_path):
     np.testing.assert_array_equal(cine.frames, frames)
 
 
-def test_video_rate_comes_from_the_container(tmp_path):
+def test_video_container_rate_is_reported_not_taken(tmp_path):
+    """A video container's rate is a playback rate (measurement.imaging.frame_rate): the
+    recording states no rate, the container's is kept aside for the message."""
     import cv2
 
     path = tmp_path / "v.avi"
@@ -355,7 +357,8 @@ def test_video_rate_comes_from_the_container(tmp_path):
         writer.write(np.full((H * 4, W * 4, 3), 40 * i, dtype=np.uint8))
     writer.release()
     rec = read_recording(path)
-    assert rec.fps_hz == pytest.approx(25.0) and rec.fps_source == "video container"
+    assert rec.fps_hz is None and rec.container_fps_hz == pytest.approx(25.0)
+    assert "playback rate" in rec.fps_source
     assert rec.bit_depth is None and rec.first_frame_time_s is None
 
 

@@ -202,7 +202,7 @@ def rendered_stack(tmp_path, n=60, hide_ball=None):
 def test_track_command_finds_markers_and_writes_tracks(tmp_path, capsys):
     path, theta, beta, _ = rendered_stack(tmp_path)
     out = tmp_path / "tr"
-    assert main(["track", str(path), "--out", str(out)]) == 0
+    assert main(["track", str(path), "--out", str(out), "--fps", "4500"]) == 0
     err = capsys.readouterr().err
     assert "centre (" in err and "ball (" in err and "--seeds" in err
     tr = read_tracks_csv(out / "tracks.csv")
@@ -217,14 +217,14 @@ def test_track_command_finds_markers_and_writes_tracks(tmp_path, capsys):
 def test_track_with_malformed_seeds_exits_2(tmp_path, capsys):
     path, *_ = rendered_stack(tmp_path, n=25)
     out = tmp_path / "tr"
-    assert main(["track", str(path), "--out", str(out), "--seeds", "1,2;3"]) == 2
+    assert main(["track", str(path), "--out", str(out), "--fps", "4500", "--seeds", "1,2;3"]) == 2
     assert "seeds" in capsys.readouterr().err
     assert not out.exists()
 
 
 def test_track_with_seeds_outside_the_frame_exits_2(tmp_path, capsys):
     path, *_ = rendered_stack(tmp_path, n=25)
-    assert main(["track", str(path), "--out", str(tmp_path / "tr"),
+    assert main(["track", str(path), "--out", str(tmp_path / "tr"), "--fps", "4500",
                  "--seeds", "128,128;300,40;150,120"]) == 2
     assert "position 2 is outside" in capsys.readouterr().err
 
@@ -233,7 +233,7 @@ def test_track_lost_marker_names_the_frames(tmp_path, capsys):
     path, _, _, (c, cd, ball) = rendered_stack(tmp_path, n=60, hide_ball=(20, 35))
     seeds = f"{c[0, 0]},{c[0, 1]};{cd[0, 0]},{cd[0, 1]};{ball[0, 0]},{ball[0, 1]}"
     out = tmp_path / "tr"
-    assert main(["track", str(path), "--out", str(out), "--seeds", seeds]) == 2
+    assert main(["track", str(path), "--out", str(out), "--fps", "4500", "--seeds", seeds]) == 2
     err = capsys.readouterr().err
     # The tracker may or may not find the ball again after frame 34; either way frame 20 is named.
     assert "'ball' lost in frames 20-" in err

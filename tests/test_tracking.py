@@ -367,8 +367,9 @@ def test_two_reflections_never_silently(tmp_path):
     path = tmp_path / "rec.npy"
     write_npy(path, two)
     s = format_seeds(seeds)
-    rc1 = main(["track", str(path), "--out", str(tmp_path / "t1"), "--seeds", s, "--quiet"])
-    rc2 = main(["track", str(path), "--out", str(tmp_path / "t2"), "--seeds", s,
+    rc1 = main(["track", str(path), "--out", str(tmp_path / "t1"), "--fps", "4500", "--seeds", s,
+                "--quiet"])
+    rc2 = main(["track", str(path), "--out", str(tmp_path / "t2"), "--fps", "4500", "--seeds", s,
                 "--ball-reflections", "2", "--quiet"])
     assert rc2 == 0 and (tmp_path / "t2" / "tracks.csv").exists()
     if rc1 != 0:

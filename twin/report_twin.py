@@ -5,7 +5,8 @@
 frame time, maps theta and beta to marker positions (:class:`render.CameraGeometry`) and renders
 the high-speed camera recording (:func:`render.render_frames`). It writes, atomically:
 
-* ``frames.tif``: multi-page 8-bit TIFF (N frames of H x W);
+* ``frames.tif``: multi-page 8-bit TIFF (N frames of H x W), the frame rate and the first
+  frame's time in its metadata (``abu measure`` reads them: :mod:`measurement.imaging.frame_rate`);
 * ``truth.csv``: per frame the time, the true pixel centres of the three markers, the ball's
   apparent centre (true + lighting offset), theta, beta, omega, omega_dot, beta_dot, omega_ref,
   mu_req and the stick/slip mode (-1, 0, +1 = sign of beta_dot); column names carry units;
@@ -299,7 +300,8 @@ def render_twin(out_dir: str | Path, settings: TwinSettings | None = None, *,
         "units": {"fps": "frames/s", "mu": "1", "mu_d": "1", "seeds": "px"},
     }
     out.mkdir(parents=True, exist_ok=True)
-    write_multipage_tiff(out / "frames.tif", frames)
+    write_multipage_tiff(out / "frames.tif", frames, fps_hz=s.fps,
+                         first_frame_time_s=float(times[0]))
     atomic_write_text(out / "truth.csv", _truth_csv(times, centre, cd, ball, apparent, state))
     atomic_write_text(out / "meta.json", dumps(meta))
     return out

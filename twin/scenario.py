@@ -341,7 +341,7 @@ def render_scenario(out_dir: str | Path, scn: Scenario) -> Path:
     meta = scenario_meta(scn, state, pos)
     truth = _truth_csv(scn, state, pos)
     out.mkdir(parents=True, exist_ok=True)
-    write_multipage_tiff(out / "frames.tif", frames)
+    write_multipage_tiff(out / "frames.tif", frames, fps_hz=scn.fps, first_frame_time_s=0.0)
     atomic_write_text(out / "truth.csv", truth)
     atomic_write_text(out / "meta.json", dumps(meta))
     return out

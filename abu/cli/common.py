@@ -109,6 +109,14 @@ def _u(unit: str) -> str:
 
 
 # ---------------------------------------------------------------------------- error naming
+def add_figure_format(p) -> None:
+    """``--figure-format png|pdf|svg`` (every command that draws figures)."""
+    from abu_model.figure_files import FIGURE_FORMATS, PNG_DPI
+    p.add_argument("--figure-format", choices=FIGURE_FORMATS, default="png",
+                   help=f"file format of the figures: png ({PNG_DPI} dpi, default), or pdf / "
+                        "svg (vector, for print)")
+
+
 def log(args: argparse.Namespace, message: str) -> None:
     """A progress message on stderr, unless the command runs with ``--quiet``."""
     if not getattr(args, "quiet", False):

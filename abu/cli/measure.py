@@ -17,11 +17,12 @@ from pathlib import Path
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import AbuError, ParameterError
 from abu_model.json_text import dumps
-from abu.cli.common import MAX_BINS, add_overwrite, in_range, integer_range, log as _log
+from abu.cli.common import (MAX_BINS, add_figure_format, add_overwrite, in_range, integer_range,
+                            log as _log)
 from abu.cli.output_tx import check_not_inside, output_folder
 
 from abu.cli.checks_measure import check_analysis_options, check_tracking_options
-from measurement.pipeline import (DEFAULT_D_M, DEFAULT_FPS, DEFAULT_L_M, SUMMARY_KIND,  # noqa: F401
+from measurement.pipeline import (DEFAULT_D_M, DEFAULT_L_M, SUMMARY_KIND,  # noqa: F401
                                   SUMMARY_VERSION, TrackingSettings, measure_recording,
                                   measure_tracks_file, track_recording, write_measurement,
                                   write_tracks)
@@ -40,6 +41,11 @@ def _positive(name: str, value: float | None, unit: str) -> float | None:
     if not (math.isfinite(value) and value > 0):
         raise ParameterError(name, value, f"a finite number > 0 {unit}".rstrip())
     return float(value)
+
+
+def _warn(text: str) -> None:
+    """A warning: one line on stderr, even with ``--quiet``."""
+    print(text, file=sys.stderr)
 
 
 def _tracking_settings(args: argparse.Namespace) -> TrackingSettings:
@@ -61,13 +67,13 @@ def _tracking_settings(args: argparse.Namespace) -> TrackingSettings:
 def cmd_track(args: argparse.Namespace) -> int:
     """``abu track INPUT --out DIR``: marker tracks only (tracks.csv, tracking.json)."""
     check_tracking_options(args)
-    fps = _positive("--fps", args.fps, "frames/s") or DEFAULT_FPS
+    fps = _positive("--fps", args.fps, "frames/s")
     settings = _tracking_settings(args)
     out = Path(args.out)
     check_not_inside(out, [args.input])
     with output_folder(out, overwrite=args.overwrite) as tmp:
         tracks = track_recording(args.input, fps_hz=fps, settings=settings,
-                                 log=lambda text: _log(args, text))
+                                 log=lambda text: _log(args, text), warn=_warn)
         write_tracks(tracks, tmp)
     _log(args, f"wrote {out / 'tracks.csv'} ({tracks.info['frames']} frames, lost "
                f"{tracks.info['lost_frames']})")
@@ -119,8 +125,10 @@ def cmd_measure(args: argparse.Namespace) -> int:
             result = measure_tracks_file(args.input, fps_hz=fps_opt, **common)
         else:
             result = measure_recording(args.input, fps_hz=fps_opt, tracking=settings,
-                                       log=lambda text: _log(args, text), **common)
-        write_measurement(result, tmp, plots=not args.no_plots)
+                                       log=lambda text: _log(args, text), warn=_warn,
+                                       **common)
+        write_measurement(result, tmp, plots=not args.no_plots,
+                          figure_format=args.figure_format)
     if args.json:
         sys.stdout.write(dumps(result.summary))
     else:
@@ -143,7 +151,7 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
         result = {"kind": COMBINED_KIND, "format_version": SUMMARY_VERSION,
                   **combine_summaries(intervals, bins=args.bins)}
         text = dumps(result)
-        plot_histogram(result, tmp / "histogram.png")
+        plot_histogram(result, tmp / "histogram", args.figure_format)
         atomic_write_text(tmp / "measure_summary.json", text)
     if args.json:
         sys.stdout.write(text)
@@ -156,8 +164,11 @@ def cmd_measure_summary(args: argparse.Namespace) -> int:
 
 def _add_tracking_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float, default=None,
-                   help=f"frame rate [frames/s] (default {DEFAULT_FPS:g}; with --tracks the "
-                        "CSV's time column is used)")
+                   help="frame rate of the recording [frames/s]. Default: the rate the file "
+                        "states (Photron CIH/CIHX, Phantom CINE, a TIFF of 'abu render'); "
+                        "required for video (its container holds a playback rate), .npy stacks, "
+                        "folders of frames and other TIFFs; given, it overrides the file's (with "
+                        "a warning). With --tracks the CSV's time column is used")
     p.add_argument("--seeds", default=None,
                    help="marker positions in frame 0, 'x,y;x,y;x,y' [px] (x = column, y = row) "
                         "in the order ABU centre; CD marker; ball. Default: found automatically")
@@ -181,7 +192,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("track", help="track the three markers of a recording",
                               description="Track the ABU centre, CD and ball markers through a "
                                           "recording and write tracks.csv.")
-    p.add_argument("input", help="folder of frames, multi-page TIFF, .npy stack or video")
+    p.add_argument("input", help="Photron MRAW (.cih/.cihx/.mraw), Phantom .cine, multi-page "
+                                 "TIFF, folder of frames, .npy stack or video")
     p.add_argument("--out", required=True, help="output folder")
     add_overwrite(p)
     _add_tracking_options(p)
@@ -224,7 +236,8 @@ def register(subparsers) -> None:
                    help="level of the confidence sets on mu and mu_d (default 0.95)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
-    p.add_argument("--no-plots", action="store_true", help="do not write the PNG figures")
+    p.add_argument("--no-plots", action="store_true", help="do not write the figures")
+    add_figure_format(p)
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify' of the setup that "
                    "made the recording (recorded in summary.json for 'abu next')")
     from abu.cli.camera import add_camera_option
@@ -241,6 +254,7 @@ def register(subparsers) -> None:
     add_overwrite(p)
     p.add_argument("--bins", type=int, default=100, help="grid points of the histogram")
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    add_figure_format(p)
     p.set_defaults(func=cmd_measure_summary)
 
 

@@ -17,7 +17,8 @@ from typing import Any
 
 from abu_model.errors import ParameterError
 
-from abu.cli.common import add_overwrite, finite, in_range, integer_range, positive
+from abu.cli.common import (add_figure_format, add_overwrite, finite, in_range, integer_range,
+                            positive)
 
 HZ = 2.0 * math.pi
 
@@ -100,7 +101,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         with output_folder(args.out, overwrite=args.overwrite) as tmp:
             (tmp / "drive.json").write_text(_dumps(result.drive.to_dict()), encoding="utf-8")
             if not args.no_plots:
-                plot_identify(result, tmp / "fit.png")
+                plot_identify(result, tmp / "fit", args.figure_format)
     if args.json:
         sys.stdout.write(_dumps(result.as_dict()))
         return 0
@@ -120,7 +121,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
                                      else rm["message"]))
     if args.out:
         print(f"wrote {Path(args.out) / 'drive.json'}"
-              + ("" if args.no_plots else f" and {Path(args.out) / 'fit.png'}"))
+              + ("" if args.no_plots else
+                 f" and {Path(args.out) / ('fit.' + args.figure_format)}"))
     return 0
 
 
@@ -204,7 +206,7 @@ def _write_design(args, payload: dict, design, check, name: str) -> None:
     with output_folder(args.out, overwrite=args.overwrite) as tmp:
         (tmp / f"{name}.json").write_text(_dumps(payload), encoding="utf-8")
         if not args.no_plots:
-            plot_design(design, tmp / f"{name}.png", check)
+            plot_design(design, tmp / name, check, args.figure_format)
 
 
 def cmd_design(args: argparse.Namespace) -> int:
@@ -278,7 +280,8 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-check", action="store_true", help="skip the co-simulation check (FMUs)")
     g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built if missing)")
     g.add_argument("--out", default=None, help="write the JSON and a PNG plot into this folder")
-    g.add_argument("--no-plots", action="store_true", help="no PNG")
+    g.add_argument("--no-plots", action="store_true", help="no figure")
+    add_figure_format(g)
     g.add_argument("--json", action="store_true", help="print JSON on stdout")
     add_overwrite(g)
 
@@ -311,6 +314,7 @@ def register(subparsers) -> None:
                    help="loop model (default pi-lag)")
     p.add_argument("--out", default=None, help="write drive.json and fit.png into this folder")
     p.add_argument("--no-plots", action="store_true", help="no fit.png")
+    add_figure_format(p)
     p.add_argument("--json", action="store_true", help="print the drive as JSON on stdout")
     add_overwrite(p)
     p.set_defaults(func=cmd_identify)

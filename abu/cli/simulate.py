@@ -12,7 +12,7 @@ from abu_model.errors import ParameterError
 
 from abu.cli.checks_cosim import (check_fmu_dir, check_ramp, check_staircase,
                                   check_table41, check_table41_speeds)
-from abu.cli.common import add_overwrite
+from abu.cli.common import add_figure_format, add_overwrite
 from abu.cli.options_cosim import (add_controller_options, add_plant_options,
                                    add_staircase_options, ramp_from_args, renamed,
                                    staircase_from_args)
@@ -61,8 +61,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "1e-9 s; see docs/harness.md)")
     g.add_argument("--fmu-dir", default=None, help="folder with the FMUs (built there if missing; "
                                                    "default: a temporary build)")
-    g.add_argument("--out", default=None, help="write result.csv, summary.json and PNG plots here")
+    g.add_argument("--out", default=None, help="write result.csv, summary.json and the figures "
+                                               "here")
     add_overwrite(g)
+    add_figure_format(g)
     g.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     g.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, "
@@ -115,7 +117,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         out = Path(args.out)
         with output_folder(out, overwrite=args.overwrite) as tmp:
             result = run(exp, args.fmu_dir, progress=args.progress)
-            written = [out / p.relative_to(tmp) for p in write_outputs(result, tmp)]
+            written = [out / p.relative_to(tmp)
+                       for p in write_outputs(result, tmp, args.figure_format)]
     else:
         result = run(exp, args.fmu_dir, progress=args.progress)
     if args.json:

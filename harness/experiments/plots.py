@@ -1,12 +1,13 @@
-"""PNG plots of a co-simulated experiment (report figs. 4.1-4.2, 4.4-4.7), without a display.
+"""Figures of a co-simulated experiment (report figs. 4.1-4.2, 4.4-4.7), without a display:
+PNG at :data:`abu_model.figure_files.PNG_DPI` dpi, or PDF / SVG (``figure_format``).
 
 Each figure has time [s] on the x axis and SI units on the y axis (speeds also in Hz on a
-secondary axis). Rows at a discontinuity (left then right limit at the same time) draw the
-jump as a vertical segment. Files are written atomically.
+secondary axis); legends sit right of the data, the layout is constrained (no clipped label).
+Rows at a discontinuity (left then right limit at the same time) draw the jump as a vertical
+segment. Files are written atomically.
 """
 from __future__ import annotations
 
-import io
 import math
 from pathlib import Path
 from typing import Any, Mapping
@@ -17,23 +18,45 @@ matplotlib.use("Agg")  # no display: tests and servers
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from abu_model.atomic_io import atomic_write_bytes  # noqa: E402
+from abu_model.figure_files import save_figure  # noqa: E402
 
 PLOTS = ("omega", "omega_dot", "beta", "beta_dot", "mu_req")
 
 
-def save_png(fig, path: Path) -> Path:
-    """Write ``fig`` as a PNG atomically and close it; returns the path."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+#: Size of one time-series figure [in] and its fonts [pt].
+FIGSIZE = (7.5, 3.6)
+LEGEND_PT = 8
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, figsize=FIGSIZE, **kw):
+    """(figure, axes) with a constrained layout (room for outside legends and every label)."""
+    return plt.subplots(nrows, ncols, figsize=figsize, layout="constrained", **kw)
+
+
+def legend_outside(ax) -> None:
+    """The legend right of the axes (and of a secondary axis), outside the data."""
+    fig = ax.figure
+    if len(fig.axes) == 1:   # the layout engine places a figure legend beside everything
+        handles, labels = ax.get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside right upper", fontsize=LEGEND_PT,
+                   frameon=False)
+        return
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=LEGEND_PT, frameon=False,
+              borderaxespad=0.0)
+
+
+def save_fig(fig, path: Path, figure_format: str = "png") -> Path:
+    """Write ``fig`` (suffix of ``path`` replaced by ``figure_format``'s) atomically and close
+    it; returns the path written."""
+    try:
+        return save_figure(fig, path, figure_format)
+    finally:
+        plt.close(fig)
 
 
 def _hz_axis(ax) -> None:
     ax.secondary_yaxis("right", functions=(lambda w: w / (2 * math.pi),
-                                           lambda f: f * 2 * math.pi)).set_ylabel("[Hz]")
+                                           lambda f: f * 2 * math.pi)).set_ylabel("omega [Hz]")
 
 
 def _mark_slip(ax, summary: Mapping[str, Any]) -> None:
@@ -42,10 +65,11 @@ def _mark_slip(ax, summary: Mapping[str, Any]) -> None:
 
 
 def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
-                    out_dir: str | Path, prefix: str = "") -> list[Path]:
-    """Write omega, omega_dot, beta, beta_dot and mu_req plots into ``out_dir``.
+                    out_dir: str | Path, prefix: str = "",
+                    figure_format: str = "png") -> list[Path]:
+    """Write omega, omega_dot, beta, beta_dot and mu_req figures into ``out_dir``.
 
-    Returns the paths written (``<prefix>omega.png`` ...).
+    Returns the paths written (``<prefix>omega.png`` ..., or ``.pdf`` / ``.svg``).
     """
     out = Path(out_dir)
     t = np.asarray(table["time"])
@@ -53,38 +77,42 @@ def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
     mode = summary.get("experiment", {}).get("theta_ref_mode")
     if mode:
         title = f"{title} ({mode})"
+    title = f", {title}" if title else ""
     written = []
 
-    fig, ax = plt.subplots(figsize=(7, 3.6))
+    fig, ax = new_figure()
     if "omega_ref" in table:
         ax.plot(t, table["omega_ref"], color="0.6", lw=1, label="setpoint / prescribed")
     ax.plot(t, table["omega"], lw=1.3, label="omega")
     _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="omega [rad/s]", title=f"ABU speed {title}")
+    ax.set(xlabel="time [s]", ylabel="omega [rad/s]", title=f"ABU speed{title}")
     _hz_axis(ax)
-    ax.legend(loc="best", fontsize=8)
-    written.append(save_png(fig, out / f"{prefix}omega.png"))
+    legend_outside(ax)
+    written.append(save_fig(fig, out / f"{prefix}omega", figure_format))
 
-    fig, ax = plt.subplots(figsize=(7, 3.6))
-    ax.plot(t, table["alpha"], lw=1.3)
+    fig, ax = new_figure()
+    ax.plot(t, table["alpha"], lw=1.3, label="omega_dot")
     _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="omega_dot [rad/s^2]", title=f"ABU acceleration {title}")
-    written.append(save_png(fig, out / f"{prefix}omega_dot.png"))
+    ax.set(xlabel="time [s]", ylabel="omega_dot [rad/s^2]", title=f"ABU acceleration{title}")
+    legend_outside(ax)
+    written.append(save_fig(fig, out / f"{prefix}omega_dot", figure_format))
 
-    fig, ax = plt.subplots(figsize=(7, 3.6))
-    ax.plot(t, table["beta"], lw=1.3)
+    fig, ax = new_figure()
+    ax.plot(t, table["beta"], lw=1.3, label="beta")
     _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="beta [rad]", title=f"Ball angle relative to the ABU {title}")
-    written.append(save_png(fig, out / f"{prefix}beta.png"))
+    ax.set(xlabel="time [s]", ylabel="beta [rad]", title=f"Ball angle relative to the ABU{title}")
+    legend_outside(ax)
+    written.append(save_fig(fig, out / f"{prefix}beta", figure_format))
 
-    fig, ax = plt.subplots(figsize=(7, 3.6))
-    ax.plot(t, table["beta_dot"], lw=1.3)
+    fig, ax = new_figure()
+    ax.plot(t, table["beta_dot"], lw=1.3, label="beta_dot")
     _mark_slip(ax, summary)
     ax.set(xlabel="time [s]", ylabel="beta_dot [rad/s]",
-           title=f"Ball speed relative to the ABU {title}")
-    written.append(save_png(fig, out / f"{prefix}beta_dot.png"))
+           title=f"Ball speed relative to the ABU{title}")
+    legend_outside(ax)
+    written.append(save_fig(fig, out / f"{prefix}beta_dot", figure_format))
 
-    fig, ax = plt.subplots(figsize=(7, 3.6))
+    fig, ax = new_figure()
     stuck = np.asarray(table["mode"]) == 0
     mu_req = np.where(stuck, table["mu_req"], np.nan)
     ax.plot(t, mu_req, lw=1.3, label="mu_req while stuck")
@@ -95,8 +123,8 @@ def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
             ax.axhline(value, color=color, lw=0.9, ls="--" if key != "mu" else "-",
                        label=f"{label} = {value:.4g}")
     _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="mu_req = (l - d/5)|alpha| / (l omega^2) [-]",
-           title=f"Friction needed to stick {title}")
-    ax.legend(loc="best", fontsize=8)
-    written.append(save_png(fig, out / f"{prefix}mu_req.png"))
+    ax.set(xlabel="time [s]", ylabel="mu_req [-]",
+           title=f"Friction needed to stick{title}\nmu_req = (l - d/5)|omega_dot| / (l omega^2)")
+    legend_outside(ax)
+    written.append(save_fig(fig, out / f"{prefix}mu_req", figure_format))
     return written

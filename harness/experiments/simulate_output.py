@@ -9,15 +9,19 @@ from typing import Any
 HZ = 2.0 * math.pi
 
 
-def write_outputs(result, out: Path) -> list[Path]:
-    """result.csv, summary.json and the PNG plots of an experiment into ``out``."""
+def write_outputs(result, out: Path, figure_format: str = "png") -> list[Path]:
+    """result.csv, summary.json and the figures (``figure_format`` png, pdf or svg) of an
+    experiment into ``out``."""
+    from abu_model.figure_files import check_figure_format
     from harness.experiments.plots import plot_experiment
     from harness.experiments.results_io import write_json, write_table_csv
 
+    figure_format = check_figure_format(figure_format)
     out.mkdir(parents=True, exist_ok=True)
     written = [write_table_csv(out / "result.csv", result.table, result.units),
                write_json(out / "summary.json", tagged_summary(result.summary))]
-    return written + plot_experiment(result.table, result.summary, out)
+    return written + plot_experiment(result.table, result.summary, out,
+                                     figure_format=figure_format)
 
 
 #: ``kind`` and ``format_version`` of an ``abu simulate`` summary.json (readers check them).

@@ -28,6 +28,7 @@ import numpy as np
 
 
 from measurement.imaging import sample_formats as fmt
+from measurement.imaging.frame_rate import rate_from_render_meta, rate_from_tiff
 from measurement.imaging.recording_checks import (  # noqa: F401  (re-exported names)
     MAX_FRAMES, MAX_PIXELS, RecordingError, check_size, check_tiff_complete, tifffile_messages)
 from measurement.imaging.recording import (  # noqa: F401  (re-exported names)
@@ -145,12 +146,14 @@ def _read_tiff(p: Path, *, mmap: bool = True) -> Recording:
     import tifffile
 
     n_pages = None  # known once the structure is checked
+    rate = (None, None, None)  # fps_hz, fps_source, first_frame_time_s
     try:
         with tifffile_messages() as messages, tifffile.TiffFile(p) as tif:
             pages = tif.pages
             if len(pages) == 0:
                 raise RecordingError(f"TIFF '{p}' holds no frames")
             check_tiff_complete(p, tif, messages)
+            rate = rate_from_tiff(p, tif)
             n_pages = len(pages)
             series = tif.series
             if len(series) > 1:
@@ -169,6 +172,7 @@ def _read_tiff(p: Path, *, mmap: bool = True) -> Recording:
         raise
     except Exception as exc:  # tifffile raises many types on corrupt files
         colour = False
+        rate = rate_from_render_meta(p)
         frames = _cv2_read_multi(p)  # e.g. LZW compression without the imagecodecs package
         if frames is None or n_pages is None or frames.shape[0] != n_pages:
             # the fallback only decodes what a checked structure describes, page for page
@@ -178,7 +182,8 @@ def _read_tiff(p: Path, *, mmap: bool = True) -> Recording:
         frames = fmt.luma(frames, "RGB")
     frames = frames.reshape((-1,) + frames.shape[-2:]) if frames.ndim > 3 else frames
     frames, note = _convert(frames, was_colour=colour)
-    return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}{note}")
+    return Recording(check_stack(frames, f"TIFF '{p}'"), f"multi-page TIFF {p}{note}",
+                     fps_hz=rate[0], fps_source=rate[1], first_frame_time_s=rate[2])
 
 
 def _raise_differing_pages(p: Path, tif) -> None:
@@ -356,7 +361,9 @@ def _read_video(p: Path) -> Recording:
         cap.release()
     if not frames:
         raise RecordingError(f"video '{p}' holds no readable frames")
+    # The container's rate is a playback rate for a high-speed camera's export, not the
+    # recording's: reported, never used (measurement.imaging.frame_rate explains).
     known = bool(np.isfinite(fps) and fps > 0)
     return Recording(np.stack(frames), f"video {p} (converted to grayscale)",
-                     fps_hz=float(fps) if known else None,
-                     fps_source="video container" if known else None)
+                     fps_source="none: a video container states only a playback rate",
+                     container_fps_hz=float(fps) if known else None)

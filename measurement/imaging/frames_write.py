@@ -8,11 +8,19 @@ import numpy as np
 
 from abu_model.atomic_io import atomic_open
 
+from measurement.imaging.frame_rate import tiff_metadata
 from measurement.imaging.recording import FRAME_SUFFIXES, RecordingError, check_stack
 
 
-def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray) -> Path:
+def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray, *,
+                         fps_hz: float | None = None,
+                         first_frame_time_s: float | None = None) -> Path:
     """Write an (N, H, W) uint8 stack as one multi-page grayscale TIFF, atomically.
+
+    Args:
+        fps_hz: frame rate [frames/s], stored in the TIFF's JSON ImageDescription
+            (:mod:`measurement.imaging.frame_rate`) for the reader to use; None: none stored.
+        first_frame_time_s: time of frame 0 [s], stored beside the rate.
 
     Returns the path written. Raises :class:`RecordingError` if ``frames`` is not a stack.
     """
@@ -20,8 +28,10 @@ def write_multipage_tiff(path: str | os.PathLike, frames: np.ndarray) -> Path:
 
     target = Path(path)
     frames = check_stack(np.asarray(frames), f"frames for '{target}'")
+    metadata = tiff_metadata(fps_hz, first_frame_time_s)
     with atomic_open(target, "wb") as handle:
-        tifffile.imwrite(handle, frames, photometric="minisblack", contiguous=True)
+        tifffile.imwrite(handle, frames, photometric="minisblack", contiguous=True,
+                         metadata=metadata)
     return target
 
 

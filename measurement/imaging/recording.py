@@ -25,9 +25,12 @@ class Recording:
         frame_names: for a folder of frames, the file name of each frame (for messages);
             None for stacks and videos.
         fps_hz, fps_source: frame rate the file states [1/s] and where it was read (camera
-            file header, video container); None when the file gives none.
+            file header, our TIFF metadata, a render's meta.json); None when the file gives
+            none (``fps_source`` may then say why). See :mod:`frame_rate`.
         bit_depth: bits per sample in a camera file (before conversion to 8 bits), else None.
         first_frame_time_s: time of the first frame after the camera's trigger [s], if known.
+        container_fps_hz: a video container's (playback) rate [1/s]: reported, never used as
+            the recording's rate.
     """
 
     frames: np.ndarray
@@ -37,6 +40,7 @@ class Recording:
     fps_source: str | None = None
     bit_depth: int | None = None
     first_frame_time_s: float | None = None
+    container_fps_hz: float | None = None
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])

@@ -388,4 +388,10 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         t_slip=float(onset) if slip_seen and np.isfinite(onset) else None,
         beta_model=best_curve, beta_model_low=low_curve, beta_model_high=high_curve,
         residual=np.asarray(beta, float) - best_curve,
-        details=_details(fit, lrf, pset, crit, nuis, opt))
+        details={**_details(fit, lrf, pset, crit, nuis, opt), "model_curves": {
+            # the (mu, mu_d) each drawn model curve of beta.png was integrated with
+            "best": {"mu": float(pset.mu_hat), "mu_d": float(best_mud)},
+            "low": None if low_curve is None else {"mu": float(pset.low),
+                                                   "mu_d": float(pset.low)},
+            "high": None if high_curve is None else {
+                "mu": float(pset.high), "mu_d": float(pset.high * MU_D_RATIO[0])}}})

@@ -39,13 +39,15 @@ class MeasurementInputError(AbuError, ValueError):
 
 def check_sampling(time: np.ndarray, source: str, *, fps_option: str, sg_window_s: float,
                    polyorder: int, estimator: str, trim_s: float | None,
-                   knot_spacing_s: float = KNOT_SPACING_S) -> None:
+                   knot_spacing_s: float = KNOT_SPACING_S, rate_from: str | None = None) -> None:
     """Frame rate, record length and trim against what the estimators need.
 
     Args:
         time: frame times [s].
         source: the option or file the times come from (``--fps`` or the tracks file).
         fps_option: how to name the frame rate in a message.
+        rate_from: for a recording whose file states the rate, where it states it (then the
+            times are not a time column).
     """
     n = time.size
     duration = float(time[-1] - time[0]) if n > 1 else 0.0
@@ -55,6 +57,10 @@ def check_sampling(time: np.ndarray, source: str, *, fps_option: str, sg_window_
     def fail(expected: str) -> None:
         if source == fps_option:
             raise ParameterError(fps_option, float(f"{fps:.12g}"), expected)
+        if rate_from is not None:
+            raise MeasurementInputError(f"{source}: its frame rate ({rate_from}) gives "
+                                        f"{fps:.6g} frames/s and {duration:.4g} s; expected "
+                                        f"{expected} (or give the rate with {fps_option})")
         raise MeasurementInputError(f"{source}: its time column gives {fps:.6g} frames/s and "
                                     f"{duration:.4g} s; expected {expected} (time in ms instead "
                                     "of s?)")

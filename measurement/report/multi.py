@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 
 from abu_model import validate
-from abu_model.atomic_io import atomic_open
 from abu_model.errors import AbuError
 
 
@@ -272,35 +271,54 @@ def combine_summaries(intervals: list[dict], *, bins: int = 100) -> dict:
     }
 
 
-def plot_histogram(result: dict, path: str | os.PathLike) -> Path:
-    """Write the histogram of fig. 5.11 with the ranges and the Turnbull median (PNG)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def plot_histogram(result: dict, path: str | os.PathLike, figure_format: str = "png") -> Path:
+    """Draw the histogram of fig. 5.11 (the exact step function of the records' intervals, not
+    the grid's), the ranges and the Turnbull median interval; PNG, PDF or SVG (the suffix of
+    ``path`` is replaced by ``figure_format``'s). Returns the path written."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
-    mu = np.asarray(result["histogram"]["mu"])
-    count = np.asarray(result["histogram"]["count"])
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.step(mu, count, where="mid", color="C0", label="intervals containing mu")
-    ax.fill_between(mu, count, step="mid", color="C0", alpha=0.3)
+    from abu_model.figure_files import save_figure
+
+    n = int(result["n_records"])
+    grid = np.asarray(result["histogram"]["mu"], float)
+    iv = np.array([[r["mu_low"], math.inf if r["mu_high"] is None else r["mu_high"]]
+                   for r in result["intervals"]], dtype=float)
+    ends = iv[np.isfinite(iv)]
+    edges = np.unique(np.concatenate([grid[[0, -1]], ends[(ends > grid[0]) & (ends < grid[-1])]]))
+    counts = coverage_count(iv, 0.5 * (edges[:-1] + edges[1:]))
+    width, height = 8.0, 4.2
+    fig = Figure(figsize=(width, height))
+    FigureCanvasAgg(fig)
+    fig.subplots_adjust(left=0.7 / width, right=1 - 2.75 / width, top=1 - 0.45 / height,
+                        bottom=0.6 / height)
+    ax = fig.subplots()
+    ax.stairs(counts, edges, fill=True, color="C0", alpha=0.35, linewidth=0)
+    ax.stairs(counts, edges, color="C0", linewidth=1.4, label="records whose interval holds mu")
     u = result["union_hull"]
     if u[0] is not None:
-        ax.axvspan(u[0], u[1] if u[1] is not None and math.isfinite(u[1]) else mu[-1],
-                   color="0.85", zorder=0, label="in at least one (union hull)")
-    for a, b in result["majority_pieces"]:
-        ax.axvspan(a, b, color="C1", alpha=0.25, zorder=0)
-    if result["majority_pieces"]:
-        ax.plot([], [], color="C1", alpha=0.5, linewidth=6, label="in more than half")
+        ax.axvspan(u[0], u[1] if u[1] is not None and math.isfinite(u[1]) else grid[-1],
+                   color="0.9", zorder=0, linewidth=0, label="in at least one (union hull)")
+    for k, (a, b) in enumerate(result["majority_pieces"]):
+        ax.axvspan(a, b, color="C1", alpha=0.22, zorder=0, linewidth=0,
+                   label="in more than half (majority range)" if k == 0 else None)
     med = result["turnbull"]["median"]
-    ax.axvline(0.5 * (med[0] + med[1]), color="C3", linestyle="--",
-               label=f"Turnbull median in [{med[0]:.4g}, {med[1]:.4g}]")
-    ax.axhline(result["n_records"] / 2, color="k", linewidth=0.6, linestyle=":")
-    ax.set_xlabel("mu [-]")
-    ax.set_ylabel("number of intervals")
-    ax.set_title(f"Intervals on mu of {result['n_records']} records (report fig. 5.11)")
-    ax.legend(fontsize=7)
-    out = Path(path)
-    with atomic_open(out, "wb") as handle:
-        fig.savefig(handle, format="png", dpi=110)
-    plt.close(fig)
-    return out
+    if med[1] > med[0]:
+        ax.axvspan(med[0], med[1], ymin=0, ymax=1, facecolor="none", edgecolor="C3",
+                   hatch="///", linewidth=1.2, zorder=3,
+                   label=f"Turnbull median in [{med[0]:.4g}, {med[1]:.4g}]")
+    else:
+        ax.axvline(med[0], color="C3", linewidth=1.2, label=f"Turnbull median = {med[0]:.4g}")
+    ax.axhline(n / 2, color="k", linewidth=0.7, linestyle=":", label=f"half of the {n} records")
+    ax.set_xlim(grid[0], grid[-1])
+    ax.set_ylim(0, n + 0.5)
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("mu [-]", fontsize=9)
+    ax.set_ylabel("number of intervals holding mu", fontsize=9)
+    ax.tick_params(labelsize=8.5)
+    ax.set_title(f"Intervals on mu of {n} records (report fig. 5.11)", fontsize=10, loc="left",
+                 y=1.0)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False,
+              borderaxespad=0.0)
+    return save_figure(fig, path, figure_format)

@@ -1,12 +1,20 @@
-"""Figures of one analysed record (PNG, Agg backend), two files so that plotting stays cheap
-(matplotlib is imported only here, and only when plotting):
+"""Figures of one analysed record, fit for a paper (report figs. 5.6-5.9 redrawn; matplotlib is
+imported only here, and only when plotting):
 
-* ``beta.png`` -- the model fit (report fig. 5.6 made quantitative): measured beta with the
-  lighting harmonics removed, the ball model's beta at the best (mu, mu_d) and at the two bounds
-  of the confidence set, and the residual (measured - best model) in a second panel.
-* ``kinematics.png`` -- |omega| (fig. 5.7), |omega_dot| with its noise + truncation band
-  (fig. 5.8), and mu_req(t) with the running maxima of the report's interval, the model-based
-  bounds and the running-max bounds (fig. 5.9). Untrusted edges are greyed.
+* ``beta`` -- the model fit (report fig. 5.6 made quantitative): (a) the fit window, scaled to
+  the measured beta inside it (the post-slip motion runs off the top, it does not set the
+  scale); (b) the same around the slip, where mu is decided; (c) the residual (measured - best
+  model) in mrad. Every model curve's label gives the (mu, mu_d) it was integrated with
+  (``summary["model_fit"]["model_curves"]``).
+* ``kinematics`` -- |omega| (fig. 5.7), |omega_dot| with its noise + truncation band
+  (fig. 5.8), and mu_req(t) with the running maxima of the report's interval and both intervals'
+  bounds (fig. 5.9). Every panel's y axis is scaled to the *trusted* samples: the edge artefacts
+  of the derivative estimators (greyed, "untrusted") run off the axes instead of flattening
+  the data.
+
+Legends sit outside the data (right of the panels, or below them); the layout is constrained
+so that no label is clipped. Files: PNG at :data:`abu_model.figure_files.PNG_DPI` dpi, or PDF /
+SVG (``figure_format``).
 """
 from __future__ import annotations
 
@@ -19,113 +27,228 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from abu_model.atomic_io import atomic_open
+from abu_model.figure_files import save_figure
 
-FIGURES = ("beta.png", "kinematics.png")
+FIGURES = ("beta", "kinematics")
+#: Font sizes [pt] at the figure's size (7.5-8 in wide: >= 7 pt printed at 6.5 in).
+FONT_PT = 9.0
+LEGEND_PT = 8.0
+UNTRUSTED_GREY = "0.88"
 
 
-def _figure(rows: int, height: float, **kw):
-    fig = Figure(figsize=(7, height))
+def _figure(width_in: float, height_in: float, *, left_in: float, right_in: float,
+            top_in: float, bottom_in: float, hspace: float) -> Figure:
+    """A figure with fixed margins [in] (a layout engine costs ~0.25 s a figure; the tests
+    check that no text leaves the canvas or overlaps a panel)."""
+    fig = Figure(figsize=(width_in, height_in))
     FigureCanvasAgg(fig)
-    return fig, fig.subplots(rows, 1, sharex=True, **kw)
+    fig.subplots_adjust(left=left_in / width_in, right=1.0 - right_in / width_in,
+                        top=1.0 - top_in / height_in, bottom=bottom_in / height_in,
+                        hspace=hspace)
+    return fig
 
 
-def _save(fig, path: Path) -> Path:
-    with atomic_open(path, "wb") as handle:
-        fig.savefig(handle, format="png", dpi=80)
-    return path
+def _style(ax, ylabel: str) -> None:
+    ax.set_ylabel(ylabel, fontsize=FONT_PT)
+    ax.tick_params(labelsize=FONT_PT - 0.5)
+    ax.grid(True, color="0.92", linewidth=0.6)
 
 
-def _shade_untrusted(ax, t: np.ndarray, trusted: np.ndarray) -> None:
+def _legend_right(ax) -> None:
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=LEGEND_PT,
+              frameon=False, borderaxespad=0.0)
+
+
+def _limits(values, pad: float = 0.08, floor: float | None = None) -> tuple[float, float] | None:
+    """(low, high) of the finite ``values`` with ``pad`` of their range around; None if none."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    if floor is not None:
+        lo = min(lo, floor)
+    span = hi - lo if hi > lo else max(abs(hi), 1e-12)
+    return lo - pad * span, hi + pad * span
+
+
+def _shade_untrusted(ax, t: np.ndarray, trusted: np.ndarray, label: bool = False) -> None:
     idx = np.flatnonzero(trusted)
     if idx.size:
-        ax.axvspan(t[0], t[idx[0]], color="0.9", zorder=0)
-        ax.axvspan(t[idx[-1]], t[-1], color="0.9", zorder=0)
+        ax.axvspan(t[0], t[idx[0]], color=UNTRUSTED_GREY, zorder=0, linewidth=0,
+                   label="untrusted (estimator edges)" if label else None)
+        ax.axvspan(t[idx[-1]], t[-1], color=UNTRUSTED_GREY, zorder=0, linewidth=0)
 
 
-def _slip_line(ax, summary: dict) -> None:
-    if summary.get("t_slip") is not None:
-        ax.axvline(summary["t_slip"], color="k", linestyle=":", linewidth=0.8,
-                   label="model slip onset")
+def _slip_line(ax, summary: dict, label: bool = True) -> None:
+    t_slip = summary.get("t_slip")
+    if t_slip is not None:
+        ax.axvline(t_slip, color="k", linestyle=":", linewidth=0.9,
+                   label=f"model slip onset, t = {t_slip:.4f} s" if label else None)
 
 
-def plot_analysis(table: dict, summary: dict, out_dir: str | os.PathLike) -> list[Path]:
-    """Write the figures into ``out_dir``; returns their paths."""
-    out = Path(out_dir)
-    t = np.asarray(table["time_s"])
-    trusted = np.asarray(table["trusted"], dtype=bool)
-    paths = []
+def _fmt(value) -> str:
+    return "none" if value is None else format(value, ".4g")
 
-    fig, (ax, axr) = _figure(2, 5.5, gridspec_kw={"height_ratios": [3, 1]})
-    ax.plot(t, table["beta_clean_rad"], color="0.6", linewidth=0.6,
-            label="beta measured, harmonics removed")
-    fit = {"beta_model_rad": ("C0", "model, best (mu, mu_d)"),
-           "beta_model_low_rad": ("C2", "model at mu_low"),
-           "beta_model_high_rad": ("C3", "model at mu_high")}
-    for key, (color, label) in fit.items():
-        if key in table and np.isfinite(np.asarray(table[key], float)).any():
-            ax.plot(t, table[key], color=color, linewidth=1.0, label=label)
-    _slip_line(ax, summary)
+
+def _curve_labels(summary: dict) -> dict[str, tuple[str, str, float, str]]:
+    """Column -> (colour, line style, width, label naming the (mu, mu_d) the curve was drawn
+    with)."""
+    curves = (summary.get("model_fit") or {}).get("model_curves") or {}
+
+    def label(key: str, what: str) -> str:
+        c = curves.get(key)
+        if not c:
+            return f"model, {what}"
+        if abs(c["mu"] - c["mu_d"]) <= 1e-12 * max(c["mu"], 1e-300):
+            return f"model, {what}: mu = mu_d = {c['mu']:.4g}"
+        ratio = f" ({c['mu_d'] / c['mu']:.2g} mu)" if key == "high" and c["mu"] > 0 else ""
+        return f"model, {what}: mu = {c['mu']:.4g}, mu_d = {c['mu_d']:.3g}{ratio}"
+
+    # the best fit first, broad and light: a bound's curve drawn on it stays visible
+    return {"beta_model_rad": ("#7fb2e5", "-", 2.6, label("best", "best fit")),
+            "beta_model_low_rad": ("C2", "--", 1.2, label("low", "lowest mu of the set")),
+            "beta_model_high_rad": ("C3", "--", 1.2, label("high", "highest mu of the set"))}
+
+
+def _beta_panel(ax, t, table, summary, sl: slice, labels: bool) -> None:
+    """Measured beta and the model curves over ``sl``, y scaled to the measured samples."""
+    beta = np.asarray(table["beta_clean_rad"], float)
+    ax.plot(t[sl], beta[sl], ".", color="0.35", markersize=1.6, zorder=3,
+            label="beta measured (lighting harmonics removed)" if labels else None)
+    for key, (color, style, width, label) in _curve_labels(summary).items():
+        y = np.asarray(table.get(key, []), float)
+        if y.size and np.isfinite(y[sl]).any():
+            ax.plot(t[sl], y[sl], color=color, linestyle=style, linewidth=width,
+                    zorder=2 if key == "beta_model_rad" else 4,
+                    label=label if labels else None)
+    _slip_line(ax, summary, labels)
+    ax.set_xlim(t[sl][0], t[sl][-1])
+    lim = _limits(beta[sl], pad=0.12)
+    if lim is not None:
+        ax.set_ylim(*lim)
+    ax.ticklabel_format(axis="y", useOffset=False)
+    _style(ax, "beta [rad]")
+
+
+def _fit_span(t: np.ndarray, table: dict) -> tuple[int, int] | None:
     fitted = np.flatnonzero(np.isfinite(np.asarray(table.get("beta_model_rad", []), float)))
-    if fitted.size > 1:
-        # zoom on the fit window (stick + the first mrad of slip), where mu is decided
-        i0, i1 = int(fitted[0]), int(fitted[-1])
-        i2 = min(t.size - 1, i1 + (i1 - i0) // 4)
-        seg = np.asarray(table["beta_clean_rad"], float)[i0: i2 + 1]
-        pad = 0.1 * float(np.ptp(seg)) + 1e-9
-        ax.set_xlim(t[i0], t[i2])
-        ax.set_ylim(float(seg.min()) - pad, float(seg.max()) + pad)
-    lo, hi = summary.get("mu_low"), summary.get("mu_high")
+    return (int(fitted[0]), int(fitted[-1])) if fitted.size > 1 else None
+
+
+def plot_beta(table: dict, summary: dict, path: Path, figure_format: str = "png") -> Path:
+    """The model fit of beta (report fig. 5.6): fit window, zoom on the slip, residual."""
+    t = np.asarray(table["time_s"], float)
+    span = _fit_span(t, table)
+    t_slip = summary.get("t_slip")
+    zoom = span is not None and t_slip is not None and t[span[0]] < t_slip < t[span[1]]
+    rows = 3 if zoom else 2
+    height = 2.3 * rows + 2.1
+    fig = _figure(7.5, height, left_in=0.85, right_in=0.2, top_in=0.7, bottom_in=1.5,
+                  hspace=0.42)
+    axes = fig.subplots(rows, 1, height_ratios=[3, 2.2, 1.4][:rows] if zoom else [3, 1.4])
+    i0, i1 = span if span is not None else (0, t.size - 1)
+    _beta_panel(axes[0], t, table, summary, slice(i0, i1 + 1), labels=True)
+    axes[0].set_title("(a) fit window", fontsize=FONT_PT, loc="left", y=1.0)
+    if zoom:
+        # the departure from sticking: 1.2x the fitted slip time before the onset, 0.4x after
+        after = t[i1] - t_slip
+        j0 = max(i0, int(np.searchsorted(t, t_slip - 1.2 * after)))
+        j1 = min(i1, int(np.searchsorted(t, t_slip + 0.4 * after)))
+        _beta_panel(axes[1], t, table, summary, slice(j0, max(j1, j0 + 2) + 1), labels=False)
+        axes[1].set_title("(b) around the slip", fontsize=FONT_PT, loc="left", y=1.0)
+    axr = axes[-1]
+    res = np.asarray(table.get("beta_model_residual_rad", np.full(t.size, np.nan)), float)
+    axr.plot(t[i0:i1 + 1], 1e3 * res[i0:i1 + 1], color="C0", linewidth=0.5)
+    axr.axhline(0.0, color="k", linewidth=0.6)
+    axr.set_xlim(t[i0], t[i1])
+    lim = _limits(1e3 * res[i0:i1 + 1], pad=0.1)
+    if lim is not None:
+        m = max(abs(lim[0]), abs(lim[1]))
+        axr.set_ylim(-m, m)
+    _style(axr, "residual [mrad]")
+    axr.set_title(f"({'c' if zoom else 'b'}) measured - best model", fontsize=FONT_PT,
+                  loc="left", y=1.0)
+    axr.set_xlabel("time [s]", fontsize=FONT_PT)
     conf = summary.get("confidence")
     title = "Ball model fit of beta"
     if conf is not None:
-        title += (f": mu in [{'none' if lo is None else format(lo, '.4g')}, "
-                  f"{'none' if hi is None else format(hi, '.4g')}] ({100 * conf:g} %)")
-    ax.set_title(title, fontsize=9)
-    ax.set_ylabel("beta [rad]")
-    ax.legend(fontsize=7, loc="best")
-    if "beta_model_residual_rad" in table:
-        axr.plot(t, table["beta_model_residual_rad"], color="C0", linewidth=0.5)
-    axr.axhline(0.0, color="k", linewidth=0.6)
-    axr.set_ylabel("residual [rad]")
-    axr.set_xlabel("time [s]")
-    paths.append(_save(fig, out / "beta.png"))
+        title += (f": mu in [{_fmt(summary.get('mu_low'))}, {_fmt(summary.get('mu_high'))}] "
+                  f"({100 * conf:g} % confidence, kinematic errors included)")
+    fig.suptitle(title, fontsize=FONT_PT + 1, y=1.0 - 0.15 / height, va="top")
+    fig.legend(loc="lower left", bbox_to_anchor=(0.85 / 7.5, 0.0), ncols=1, fontsize=LEGEND_PT,
+               frameon=False)
+    return save_figure(fig, path, figure_format)
 
-    fig, (a1, a2, a3) = _figure(3, 8)
-    a1.plot(t, np.abs(table["omega_rad_s"]), color="C0", linewidth=0.8)
-    a1.set_ylabel("|omega| [rad/s]")
-    a1.set_title(f"Kinematics ({summary['estimator']['name']}) and friction needed to stick",
-                 fontsize=9)
-    k = summary["slip_detection"]["k_sigma"]
-    a = np.abs(table["omega_dot_rad_s2"])
-    s = np.asarray(table["sigma_omega_dot_rad_s2"])
-    b = np.asarray(table.get("bias_omega_dot_rad_s2", np.zeros_like(s)))
-    a2.fill_between(t, a - k * s - b, a + k * s + b, color="C0", alpha=0.25,
-                    label=f"+-({k:g} sigma + truncation bound)")
-    a2.plot(t, a, color="C0", linewidth=0.8, label="|omega_dot|")
-    a2.set_ylabel("|omega_dot| [rad/s^2]")
-    a2.legend(fontsize=7, loc="best")
-    a3.fill_between(t, table["mu_req_lo"], table["mu_req_hi"], color="C0", alpha=0.25,
-                    label="mu_req band")
-    a3.plot(t, table["mu_req"], color="C0", linewidth=0.8, label="mu_req")
-    a3.plot(t, table["running_max_lo"], color="C2", linewidth=0.8, label="running max (low)")
-    a3.plot(t, table["running_max_hi"], color="C3", linewidth=0.8, label="running max (high)")
+
+def _bound_lines(ax, summary: dict) -> None:
     rm = summary.get("running_max") or {}
-    for key, color, style, src in (("mu_low", "C2", "--", summary), ("mu_high", "C3", "--",
-                                                                        summary),
-                                   ("mu_low", "C2", ":", rm), ("mu_high", "C3", ":", rm)):
+    conf = summary.get("confidence")
+    model = f"model fit, {100 * conf:g} %" if conf is not None else "model fit"
+    for key, color, style, src, who in (("mu_low", "C2", "--", summary, model),
+                                        ("mu_high", "C3", "--", summary, model),
+                                        ("mu_low", "C2", ":", rm, "running max"),
+                                        ("mu_high", "C3", ":", rm, "running max")):
         if src.get(key) is not None:
-            who = "model" if src is summary else "running max"
-            a3.axhline(src[key], color=color, linestyle=style, linewidth=0.8,
+            ax.axhline(src[key], color=color, linestyle=style, linewidth=1.0,
                        label=f"{key} ({who}) = {src[key]:.4g}")
-    finite = np.asarray(table["mu_req_hi"], float)[trusted]
-    if finite.size and np.isfinite(finite).any():
-        a3.set_ylim(0, 1.15 * np.nanmax(finite))
-    a3.set_ylabel("mu [-]")
-    a3.set_xlabel("time [s]")
-    a3.legend(fontsize=6, loc="best")
-    for ax_ in (a1, a2, a3):
-        _shade_untrusted(ax_, t, trusted)
-        _slip_line(ax_, summary)
-    paths.append(_save(fig, out / "kinematics.png"))
-    return paths
+
+
+def plot_kinematics(table: dict, summary: dict, path: Path, figure_format: str = "png") -> Path:
+    """|omega|, |omega_dot| with its band, mu_req and the bounds (report figs. 5.7-5.9)."""
+    t = np.asarray(table["time_s"], float)
+    trusted = np.asarray(table["trusted"], dtype=bool)
+    fig = _figure(8.0, 8.4, left_in=0.85, right_in=2.85, top_in=0.3, bottom_in=0.55,
+                  hspace=0.28)
+    a1, a2, a3 = fig.subplots(3, 1, sharex=True)
+    omega = np.abs(np.asarray(table["omega_rad_s"], float))
+    a1.plot(t, omega, color="C0", linewidth=1.0, label="|omega|")
+    _style(a1, "|omega| [rad/s]")
+    a1.set_ylim(*(_limits(omega[trusted]) or a1.get_ylim()))
+    est = summary["estimator"]["name"]
+    a1.set_title(f"(a) speed of the ABU ({est} estimator)", fontsize=FONT_PT, loc="left", y=1.0)
+
+    k = summary["slip_detection"]["k_sigma"]
+    a = np.abs(np.asarray(table["omega_dot_rad_s2"], float))
+    s = np.asarray(table["sigma_omega_dot_rad_s2"], float)
+    b = np.asarray(table.get("bias_omega_dot_rad_s2", np.zeros_like(s)), float)
+    lo, hi = a - k * s - b, a + k * s + b
+    a2.fill_between(t, lo, hi, color="C0", alpha=0.25, linewidth=0,
+                    label=f"+-({k:g} sigma + truncation bound)")
+    a2.plot(t, a, color="C0", linewidth=1.0, label="|omega_dot|")
+    _style(a2, "|omega_dot| [rad/s^2]")
+    a2.set_ylim(*(_limits(np.concatenate([lo[trusted], hi[trusted]]), floor=0.0)
+                  or a2.get_ylim()))
+    a2.set_title("(b) acceleration of the ABU, y axis scaled to the trusted samples",
+                 fontsize=FONT_PT, loc="left", y=1.0)
+
+    a3.fill_between(t, table["mu_req_lo"], table["mu_req_hi"], color="C0", alpha=0.25,
+                    linewidth=0, label=f"mu_req +-{k:g} sigma")
+    a3.plot(t, table["mu_req"], color="C0", linewidth=1.0, label="mu_req")
+    a3.plot(t, table["running_max_lo"], color="C2", linewidth=1.0, label="running max (low)")
+    a3.plot(t, table["running_max_hi"], color="C3", linewidth=1.0, label="running max (high)")
+    _bound_lines(a3, summary)
+    top = np.asarray(table["mu_req_hi"], float)[trusted]
+    bounds = [v for v in (summary.get("mu_high"), (summary.get("running_max") or {})
+                          .get("mu_high")) if v is not None]
+    if top.size and np.isfinite(top).any():
+        a3.set_ylim(0.0, 1.1 * max([float(np.nanmax(top))] + bounds))
+    _style(a3, "mu [-]")
+    a3.set_title("(c) friction needed to stick, mu_req = (l - d/5)|omega_dot| / (l omega^2)",
+                 fontsize=FONT_PT, loc="left", y=1.0)
+    a3.set_xlabel("time [s]", fontsize=FONT_PT)
+    for i, ax_ in enumerate((a1, a2, a3)):
+        _shade_untrusted(ax_, t, trusted, label=i == 0)
+        _slip_line(ax_, summary, label=i == 0)
+        _legend_right(ax_)
+    a3.set_xlim(t[0], t[-1])
+    return save_figure(fig, path, figure_format)
+
+
+def plot_analysis(table: dict, summary: dict, out_dir: str | os.PathLike,
+                  figure_format: str = "png") -> list[Path]:
+    """Write ``beta`` and ``kinematics`` (``.png``, ``.pdf`` or ``.svg``) into ``out_dir``;
+    returns their paths."""
+    out = Path(out_dir)
+    return [plot_beta(table, summary, out / "beta", figure_format),
+            plot_kinematics(table, summary, out / "kinematics", figure_format)]

@@ -1,0 +1,207 @@
+"""The frame rate from the file (issue 20): camera files measured end to end, rates stated and
+given, and files that state none refused with a message naming ``--fps``.
+
+* One twin recording (800 frames at 2000 frames/s, rendered by ``abu render``) is written as
+  Photron MRAW with a CIH and a CIHX header at 8, 12 and 16 bits and as Phantom CINE at 8 and
+  16 bits (the 12- and 16-bit samples are the 8-bit frames shifted up, with random low bits
+  the reader's conversion must drop); each is read back frame for frame identical and measured
+  by ``abu measure`` with the interval of the TIFF of the same frames, at the rate the header
+  states (no ``--fps``).
+* A CIH at 2000 frames/s gives 0.5 ms steps in tracks.csv and names its field as the source;
+  ``--fps`` differing from it warns once on stderr and is used.
+* Video (its container's rate is a playback rate), ``.npy``, frame folders and TIFFs without our
+  metadata are refused without ``--fps``, naming the option and the file; the API names
+  ``fps_hz``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from abu.cli.main import main
+from measurement.imaging.camera_files import read_camera_file, write_cine, write_mraw
+from measurement.imaging.frame_rate import MissingFrameRateError
+from measurement.imaging.frames_io import (read_recording, write_frame_folder,
+                                           write_multipage_tiff, write_npy)
+from measurement.imaging.tracks_io import read_tracks_csv
+
+FPS = 2000.0
+N_FRAMES = 800
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory, fmu_dir):
+    """(frames (N, H, W) uint8, seeds text, folder) of a twin rendered at 2000 frames/s."""
+    out = tmp_path_factory.mktemp("twin") / "rec"
+    fmus = next(iter(fmu_dir.values())).parent
+    assert main(["render", "--out", str(out), "--frames", str(N_FRAMES), "--fps", str(FPS),
+                 "--seed", "3", "--fmu-dir", str(fmus), "--quiet"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    frames = np.array(read_recording(out / "frames.tif").frames)
+    assert frames.max() >= 128   # the 16-bit copy's shift by 8 is then the reader's
+    return frames, meta["seeds"], out
+
+
+def _measure(path, out, capsys, *extra):
+    assert main(["measure", str(path), "--out", str(out), "--json", "--no-plots",
+                 "--mc-draws", "0", "--quiet", *extra]) == 0, capsys.readouterr().err
+    return json.loads(capsys.readouterr().out)
+
+
+def _camera_copy(kind: str, bits: int, frames: np.ndarray, folder):
+    """The frames as a camera file of ``bits`` bits (higher depths: shifted up, random low
+    bits); returns (path to give, the samples written)."""
+    rng = np.random.default_rng(bits)
+    if bits == 8:
+        samples = frames
+    else:
+        shift = bits - 8
+        samples = (frames.astype(np.uint16) << shift) | rng.integers(
+            0, 2 ** shift, size=frames.shape, dtype=np.uint16)
+    if kind == "cine":
+        return write_cine(folder / "rec.cine", samples, int(FPS), bits, first_image_no=-5), samples
+    hpath, _ = write_mraw(folder / "rec", samples, FPS, bits, start_frame=-5, header=kind)
+    return hpath, samples
+
+
+def test_camera_files_measure_as_the_tiff_of_the_same_frames(twin, tmp_path, capsys):
+    frames, seeds, _ = twin
+    tif = write_multipage_tiff(tmp_path / "plain.tif", frames)   # no rate stored
+    ref = _measure(tif, tmp_path / "m_tif", capsys, "--fps", str(FPS), "--seeds", seeds)
+    assert ref["input"]["fps_source"] == "--fps (given)"
+    assert ref["mu_low"] is not None and ref["mu_high"] is not None
+    cases = [("cih", 8), ("cih", 12), ("cih", 16), ("cihx", 12), ("cine", 8), ("cine", 16)]
+    for kind, bits in cases:
+        folder = tmp_path / f"{kind}{bits}"
+        folder.mkdir()
+        path, samples = _camera_copy(kind, bits, frames, folder)
+        raw, info = read_camera_file(path)
+        np.testing.assert_array_equal(raw, samples)                       # native depth
+        np.testing.assert_array_equal(read_recording(path).frames, frames)  # as tracked
+        del raw
+        s = _measure(path, tmp_path / f"m_{kind}{bits}", capsys, "--seeds", seeds)
+        assert (s["mu_low"], s["mu_high"]) == (ref["mu_low"], ref["mu_high"]), (kind, bits)
+        assert s["status"] == ref["status"]
+        inp = s["input"]
+        assert inp["fps_hz"] == FPS and inp["bit_depth"] == bits
+        field = "FrameRate" if kind == "cine" else "Record Rate(fps)" if kind == "cih" \
+            else "recordRate"
+        assert field in inp["fps_source"], inp["fps_source"]
+        assert inp["first_frame_time_s"] == pytest.approx(-5 / FPS)
+        shutil.rmtree(folder)   # ~100 MB each
+
+
+def test_twin_tiff_states_its_rate_and_a_render_meta_json_backs_an_old_one(twin, tmp_path,
+                                                                            capsys):
+    frames, seeds, folder = twin
+    rec = read_recording(folder / "frames.tif")
+    assert rec.fps_hz == FPS and "ImageDescription" in rec.fps_source
+    assert rec.first_frame_time_s == 0.0
+    # A render written before the TIFF carried the rate: meta.json beside it states it.
+    old = tmp_path / "old"
+    old.mkdir()
+    write_multipage_tiff(old / "frames.tif", frames[:300])
+    shutil.copy(folder / "meta.json", old / "meta.json")
+    rec = read_recording(old)
+    assert rec.fps_hz == FPS and rec.fps_source.startswith("meta.json 'fps'")
+    # ... but only for the file it names.
+    (old / "frames.tif").rename(old / "other.tif")
+    assert read_recording(old / "other.tif").fps_hz is None
+
+
+def _small_stack(n=60):
+    render = pytest.importorskip("twin.render")
+    geo = render.CameraGeometry()
+    c, cd, ball = geo.marker_positions(-2 * math.pi * 9 * np.arange(n) / 4500, np.full(n, 0.6))
+    return render.render_frames(c, cd, ball, render.RenderSettings(), seed=1)
+
+
+def test_cih_rate_sets_the_time_step_and_a_differing_fps_warns(tmp_path, capsys):
+    frames = _small_stack()
+    hpath, _ = write_mraw(tmp_path / "cam", frames, 2000, 8)
+    assert main(["track", str(hpath), "--out", str(tmp_path / "t"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+    tr = read_tracks_csv(tmp_path / "t" / "tracks.csv")
+    np.testing.assert_allclose(np.diff(tr.time), 0.5e-3, rtol=1e-9)
+    info = json.loads((tmp_path / "t" / "tracking.json").read_text())
+    assert info["fps_hz"] == 2000 and "Record Rate(fps)" in info["fps_source"]
+    assert info["bit_depth"] == 8
+    # --fps overrides, with one warning line on stderr (even with --quiet).
+    assert main(["track", str(hpath), "--out", str(tmp_path / "t2"), "--fps", "4000",
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: --fps 4000") and "2000" in err[0]
+    tr = read_tracks_csv(tmp_path / "t2" / "tracks.csv")
+    np.testing.assert_allclose(np.diff(tr.time), 0.25e-3, rtol=1e-9)
+    info = json.loads((tmp_path / "t2" / "tracking.json").read_text())
+    assert info["fps_hz"] == 4000 and info["fps_source"] == "--fps (given)"
+    assert info["fps_stated_hz"] == 2000
+    # The same rate given: no warning.
+    assert main(["track", str(hpath), "--out", str(tmp_path / "t3"), "--fps", "2000",
+                 "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def _video(path, frames, fps):
+    cv2 = pytest.importorskip("cv2")
+    fourcc = cv2.VideoWriter_fourcc(*("mp4v" if path.suffix == ".mp4" else "MJPG"))
+    h, w = frames.shape[1:]
+    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), False)
+    for f in frames:
+        writer.write(f)
+    writer.release()
+    if not path.exists() or path.stat().st_size == 0:
+        pytest.skip(f"OpenCV cannot write {path.suffix} here")
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".avi", ".mp4"])
+def test_video_without_fps_is_refused_naming_the_option(tmp_path, capsys, suffix):
+    frames = _small_stack(30)
+    path = _video(tmp_path / f"v{suffix}", frames, 30.0)
+    out = tmp_path / "o"
+    assert main(["track", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--fps" in err and str(path) in err
+    assert "30 frames/s" in err and "playback" in err and "Traceback" not in err
+    assert not out.exists()
+    assert main(["track", str(path), "--out", str(out), "--fps", "4500", "--quiet"]) == 0
+    info = json.loads((out / "tracking.json").read_text())
+    assert info["fps_hz"] == 4500 and info["video_container_fps_hz"] == pytest.approx(30.0)
+
+
+def test_sources_without_a_rate_need_fps(tmp_path, capsys):
+    frames = _small_stack(25)
+    sources = {"npy": write_npy(tmp_path / "r.npy", frames),
+               "folder": write_frame_folder(tmp_path / "frames", frames),
+               "tiff": write_multipage_tiff(tmp_path / "r.tif", frames)}
+    for name, path in sources.items():
+        for command in ("track", "measure"):
+            out = tmp_path / f"{command}_{name}"
+            assert main([command, str(path), "--out", str(out)]) == 2, (command, name)
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1, err
+            assert "--fps" in err and str(path) in err and "no frame rate" in err, err
+            assert not out.exists()
+
+
+def test_api_follows_the_same_rule(tmp_path):
+    from abu import api
+
+    frames = _small_stack(40)
+    npy = write_npy(tmp_path / "r.npy", frames)
+    with pytest.raises(MissingFrameRateError, match=r"fps_hz.*r\.npy|r\.npy.*fps_hz"):
+        api.track(npy)
+    tracks = api.track(npy, fps_hz=3000)
+    assert tracks.info["fps_hz"] == 3000 and tracks.time_s[1] == pytest.approx(1 / 3000)
+    cine = write_cine(tmp_path / "r.cine", frames, 1000, 8)
+    assert api.track(cine).info["fps_source"] == "CINE header 'SETUP FrameRate'"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert api.track(cine, fps_hz=1200).info["fps_hz"] == 1200
+    assert [str(w.message) for w in caught if "fps_hz 1200" in str(w.message)]
