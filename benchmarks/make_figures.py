@@ -93,8 +93,9 @@ def make_all(out: Path, figure_format: str = "png", *, fmu_dir: Path,
     _run(["measure-summary", str(summary), str(_intervals_csv(inputs / "intervals.csv")),
           "--out", str(out / "measure-summary"), "--overwrite", *fmt])
     _run(["simulate", "--out", str(out / "simulate"), "--overwrite", *fmus, *fmt])
+    # --fmu-dir serves the co-simulation check only: with --no-check it is refused
     _run(["design", "--mu-range", "0.02", "0.04", "--out", str(out / "design"), "--overwrite",
-          *fmus, *fmt] + ([] if design_check else ["--no-check"]))
+          *fmt] + (fmus if design_check else ["--no-check"]))
     _run(["next", str(summary), "--no-check", "--out", str(out / "next"), "--overwrite", *fmt])
     pulses, setpoints = _identify_inputs(inputs)
     _run(["identify", "--pulses", str(pulses), "--pulses-per-rev", "4", "--setpoints",

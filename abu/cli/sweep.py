@@ -151,12 +151,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                 write_sweep_csv(tmp, rows)
             finally:
                 journal.close()
-        journal.remove()  # the CSV is in place: the journal has done its work
     finally:
         if client is not None:
             client.close()
         if cluster is not None:
             cluster.close()
+    # last: the CSV is in place and the cluster closed (a kill while it closes leaves the
+    # journal, so the same command finishes instead of refusing the CSV as another run's)
+    journal.remove()
     if args.json:
         print(json.dumps({"kind": SWEEP_KIND, "format_version": 1, "columns": list(COLUMNS),
                           "rows": rows}, indent=2))
