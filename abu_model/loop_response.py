@@ -116,7 +116,8 @@ def response(setpoints: Setpoints, t: Sequence[float] | np.ndarray, zeta: float,
     for j in range(len(tk)):
         gap = tk[j] - tk[j - 1] if j else 0.0
         Z[j + 1] = Z[j] * np.exp(poles * gap) + dw[j]
-    since = t - np.where(k > 0, tk[np.maximum(k - 1, 0)], 0.0)
+    # before the first step z = 0 (no exp of a time before it: it could overflow)
+    since = np.where(k > 0, t - tk[np.maximum(k - 1, 0)], 0.0)
     z = Z[k] * np.exp(np.outer(since, poles))
     # explicit sums, not '@': a threaded BLAS call costs more than these tiny products
     omega = level + np.real((z * res).sum(axis=1))
