@@ -21,6 +21,7 @@ from abu.cli.common import (MAX_BINS, add_figure_format, add_overwrite, in_range
                             log as _log)
 from abu.cli.output_tx import check_not_inside, output_folder
 
+from abu.cli.options_drive_model import add_drive_model_options, drive_model_from_args
 from abu.cli.checks_measure import check_analysis_options, check_tracking_options
 from measurement.pipeline import (DEFAULT_D_M, DEFAULT_L_M, SUMMARY_KIND,  # noqa: F401
                                   SUMMARY_VERSION, TrackingSettings, measure_recording,
@@ -95,7 +96,8 @@ def _analysis_options(args: argparse.Namespace):
                                  lower=args.lower),
         mc_draws=args.mc_draws, seed=args.seed,
         inference=InferenceOptions(confidence=in_range(
-            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95")))
+            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95")),
+        kinematics=args.kinematics, drive_model=drive_model_from_args(args))
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
@@ -239,7 +241,9 @@ def register(subparsers) -> None:
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
     add_figure_format(p)
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify' of the setup that "
-                   "made the recording (recorded in summary.json for 'abu next')")
+                   "made the recording (recorded in summary.json for 'abu next'; with "
+                   "--kinematics drive-model also its loop model)")
+    add_drive_model_options(p)
     from abu.cli.camera import add_camera_option
     add_camera_option(p)
     p.set_defaults(func=cmd_measure)

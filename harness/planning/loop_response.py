@@ -1,71 +1,29 @@
-"""Closed-form response of the closed speed loop to a piecewise-constant setpoint (SI).
+"""The closed speed loop's response to a setpoint staircase, for the planning (SI).
 
-The loop of :mod:`controller.drive` (PI on the rotor, torque lag tau, setpoint weight b) is
+The closed-form response lives in :mod:`abu_model.loop_response` (NumPy only, below both
+``harness`` and ``measurement``: the measurement's drive-model kinematics use it too); it is
+re-exported here with the python-control transfer functions of the loop, which tests and the
+identification's reports use:
 
-    G(s) = w / w_ref = (2 zeta wn b s + wn^2) / (tau s^3 + s^2 + 2 zeta wn s + wn^2),
-
-built with python-control. Its unit-step response is S(u) = 1 + sum_i c_i exp(p_i u) with the
-poles p_i and residues c_i = N(p_i) / (p_i D'(p_i)). A setpoint sequence (level L0 held since
-long before, steps dW_k at t_k) gives, with the modal sums z_i(t) = sum_{t_k <= t} dW_k
-exp(p_i (t - t_k)) (advanced step to step, so nothing overflows):
-
-    omega(t) = L(t) + sum_i c_i z_i(t)
-    alpha(t) = sum_i c_i p_i z_i(t)                          (right-hand limit at a step)
-    theta(t) = L0 t + sum_k dW_k (t - t_k) + sum_i c_i / p_i (z_i(t) - (L(t) - L0))
-
-(theta relative to theta(0) - the offset of a record is fitted apart). This is exact (no time
-stepping), vectorised over the sample times, and O(samples x poles): the identification's
-least squares and the design's search evaluate it thousands of times. It is the rotor alone
-(the ball's reaction neglected, as in the report); tests compare it with
-``control.forced_response`` and with the monolithic SciPy solver.
+    G(s) = w / w_ref = (2 zeta wn b s + wn^2) / (tau s^3 + s^2 + 2 zeta wn s + wn^2).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache
 from typing import Sequence
 
 import control
 import numpy as np
 
+from abu_model.loop_response import (LoopResponse, Setpoints, as_setpoints,  # noqa: F401
+                                     loop_polynomials, modes, response)
 from controller.drive import Drive
-
-#: Relative separation below which two poles count as repeated; they are then split by this
-#: much (the residue formula needs simple poles; the response changes by ~1e-7 relative).
-_SPLIT = 1e-7
-
-
-@dataclass(frozen=True)
-class Setpoints:
-    """A piecewise-constant speed setpoint (right-continuous).
-
-    Attributes:
-        step_times: times of the steps [s], increasing.
-        levels: levels [rad/s]; ``levels[0]`` holds before the first step (steady state),
-            ``levels[k]`` from ``step_times[k-1]`` on. len(levels) = len(step_times) + 1.
-    """
-
-    step_times: tuple[float, ...]
-    levels: tuple[float, ...]
-
-    def value(self, t: np.ndarray) -> np.ndarray:
-        """Setpoint at the times t [rad/s]."""
-        idx = np.searchsorted(np.asarray(self.step_times, float), np.asarray(t, float), "right")
-        return np.asarray(self.levels, float)[idx]
-
-
-def as_setpoints(obj) -> Setpoints:
-    """A :class:`Setpoints` from anything with ``step_times`` and ``levels`` (a Staircase)."""
-    return Setpoints(tuple(float(t) for t in obj.step_times), tuple(float(v) for v in obj.levels))
 
 
 def loop_tf(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0
             ) -> control.TransferFunction:
     """w / w_ref of the loop as a python-control transfer function."""
-    num = [2.0 * zeta * omega_n * weight, omega_n**2]
-    den = [tau, 1.0, 2.0 * zeta * omega_n, omega_n**2] if tau > 0 else \
-        [1.0, 2.0 * zeta * omega_n, omega_n**2]
-    return control.tf(num, den)
+    num, den = loop_polynomials(zeta, omega_n, tau, weight)
+    return control.tf(list(num), list(den))
 
 
 def drive_tf(drive: Drive) -> control.TransferFunction:
@@ -73,71 +31,8 @@ def drive_tf(drive: Drive) -> control.TransferFunction:
     return loop_tf(drive.zeta, drive.omega_n, drive.tau_motor, drive.setpoint_weight)
 
 
-@lru_cache(maxsize=256)  # the design's search asks for the same drive thousands of times
-def modes(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """Poles p_i [1/s] and step-response residues c_i [-] of the loop (complex arrays, not
-    to be modified: cached)."""
-    sys = loop_tf(zeta, omega_n, tau, weight)
-    num = np.real(np.asarray(sys.num[0][0], dtype=float))
-    den = np.real(np.asarray(sys.den[0][0], dtype=float))
-    poles = np.asarray(sys.poles(), dtype=complex)
-    scale = float(np.max(np.abs(poles)))
-    for i in range(len(poles)):
-        for j in range(i):
-            if abs(poles[i] - poles[j]) < _SPLIT * scale:
-                poles[i] += _SPLIT * scale * (1 + i)
-    # D'(p) from the (possibly split) poles: lead * prod_{j != i} (p_i - p_j)
-    lead = den[0]
-    dprime = np.array([lead * np.prod(np.delete(poles[i] - poles, i)) for i in range(len(poles))])
-    residues = np.polyval(num, poles) / (poles * dprime)
-    return poles, residues
-
-
-@dataclass
-class LoopResponse:
-    """omega [rad/s], alpha [rad/s^2], theta [rad] (theta(t) relative, see module) at t [s]."""
-
-    t: np.ndarray
-    omega: np.ndarray
-    alpha: np.ndarray
-    theta: np.ndarray
-
-
-def response(setpoints: Setpoints, t: Sequence[float] | np.ndarray, zeta: float,
-             omega_n: float, tau: float = 0.0, weight: float = 1.0,
-             need_theta: bool = True) -> LoopResponse:
-    """The loop's response at the times ``t`` [s] (any order) to ``setpoints``.
-
-    Starts in the steady state at ``levels[0]`` (integrator and lag at rest).
-    """
-    t = np.asarray(t, dtype=float)
-    poles, res = modes(zeta, omega_n, tau, weight)
-    tk = np.asarray(setpoints.step_times, dtype=float)
-    levels = np.asarray(setpoints.levels, dtype=float)
-    dw = np.diff(levels)
-    k = np.searchsorted(tk, t, side="right")  # steps done at t (0..K)
-    level = levels[k]
-    # Z[k, i]: modal sum just after step k (Z[0] = 0 before any step)
-    Z = np.zeros((len(tk) + 1, len(poles)), dtype=complex)
-    for j in range(len(tk)):
-        gap = tk[j] - tk[j - 1] if j else 0.0
-        Z[j + 1] = Z[j] * np.exp(poles * gap) + dw[j]
-    since = t - np.where(k > 0, tk[np.maximum(k - 1, 0)], 0.0)
-    z = Z[k] * np.exp(np.outer(since, poles))
-    # explicit sums, not '@': a threaded BLAS call costs more than these tiny products
-    omega = level + np.real((z * res).sum(axis=1))
-    alpha = np.real((z * (res * poles)).sum(axis=1))
-    theta = np.empty(0)
-    if need_theta:
-        ramp = levels[0] * t + np.concatenate([[0.0], np.cumsum(dw)])[k] * t \
-            - np.concatenate([[0.0], np.cumsum(dw * tk)])[k]
-        theta = ramp + np.real(((z - (level - levels[0])[:, None]) * (res / poles)).sum(axis=1))
-    return LoopResponse(t, omega, alpha, theta)
-
-
 def drive_response(drive: Drive, setpoints: Setpoints, t: Sequence[float] | np.ndarray,
                    need_theta: bool = True) -> LoopResponse:
-    """:func:`response` of an identified drive."""
+    """:func:`abu_model.loop_response.response` of an identified drive."""
     return response(setpoints, t, drive.zeta, drive.omega_n, drive.tau_motor,
                     drive.setpoint_weight, need_theta)

@@ -28,6 +28,7 @@ from measurement.inference import running_max as interval_mod
 from measurement.inference import uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
+from measurement.kinematics import drive_model
 from measurement.kinematics import estimators as kin_mod
 from measurement.kinematics import harmonic as harmonic_mod
 
@@ -37,6 +38,13 @@ class AnalysisError(AbuError, ValueError):
 
 
 def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
+    kin = _estimator(time, theta, opt)
+    if opt.kinematics == "drive-model":
+        return drive_model.apply(kin, theta, opt.drive_model)
+    return kin
+
+
+def _estimator(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
     if opt.estimator == "savgol":
         return kin_mod.savgol_kinematics(time, theta, window_s=opt.sg_window_s,
                                          polyorder=opt.sg_polyorder,

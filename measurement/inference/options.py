@@ -51,6 +51,10 @@ class AnalysisOptions:
         seed: Monte Carlo seed.
         e_omega, e_omega_dot: relative error bounds of the report's worst case (0.03, 0.05).
         max_lost_gap, max_lost_fraction: limits for interpolating lost markers.
+        kinematics: ``savgol`` (default: the estimator alone) or ``drive-model`` (omega and
+            omega_dot from the known drive fitted to the whole record, the estimator's where
+            the fit is refused; :mod:`measurement.kinematics.drive_model`).
+        drive_model: the drive and staircase (``DriveModelInput``) for ``drive-model``.
     """
 
     estimator: str = "savgol"
@@ -75,6 +79,8 @@ class AnalysisOptions:
     e_omega_dot: float = uncertainty.REPORT_E_OMEGA_DOT
     max_lost_gap: int = 5
     max_lost_fraction: float = 0.02
+    kinematics: str = "savgol"
+    drive_model: Any = None
 
     def __post_init__(self) -> None:
         if self.estimator not in kin_mod.ESTIMATORS:
@@ -83,6 +89,8 @@ class AnalysisOptions:
         if self.harmonic_phase not in PHASES:
             raise ParameterError("harmonic_phase", self.harmonic_phase,
                                  f"one of {', '.join(PHASES)}")
+        if self.kinematics not in ("savgol", "drive-model"):
+            raise ParameterError("kinematics", self.kinematics, "savgol or drive-model")
         if self.combine not in ("hull", "model"):
             raise ParameterError("combine", self.combine, "hull or model")
         if int(self.mc_draws) < 0:

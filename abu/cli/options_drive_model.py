@@ -1,0 +1,65 @@
+"""``abu measure --kinematics drive-model``: the staircase the recorded drive followed.
+
+The drive itself is ``--drive drive.json`` (``abu identify``); the staircase is given as in
+``abu simulate`` (``--omega0-hz --omega-end-hz --t0 --te --step-hz --rounding``), its times on
+the recording's clock (the fit adds a time offset within +- 50 ms for the camera's trigger).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+
+from abu_model.errors import ParameterError
+
+HZ = 2.0 * math.pi
+
+
+def add_drive_model_options(p: argparse.ArgumentParser) -> None:
+    """The ``--kinematics`` choice and the staircase options (no defaults: stated or refused)."""
+    p.add_argument("--kinematics", choices=["savgol", "drive-model"], default="savgol",
+                   help="omega and omega_dot from the Savitzky-Golay estimator (default) or "
+                        "from the --drive loop fitted to the whole record over the staircase "
+                        "below (the estimator's where the fit is refused; summary.json "
+                        "estimator.model says which and why)")
+    g = p.add_argument_group("staircase of the drive (with --kinematics drive-model)")
+    g.add_argument("--omega0-hz", type=float, default=None, help="initial speed [Hz]")
+    g.add_argument("--omega-end-hz", type=float, default=None,
+                   help="end of the inclined sine [Hz]")
+    g.add_argument("--t0", type=float, default=0.0,
+                   help="start of the inclined sine on the recording's clock [s] (default 0)")
+    g.add_argument("--te", type=float, default=None, help="duration of the inclined sine [s]")
+    g.add_argument("--step-hz", type=float, default=1.0,
+                   help="setpoint resolution [Hz] (default 1)")
+    g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
+                   help="when each step happens on the sine (default lead: the report's)")
+
+
+def drive_model_from_args(args: argparse.Namespace):
+    """The analysis's ``DriveModelInput`` (None with ``--kinematics savgol``); raises
+    ParameterError naming the option."""
+    if args.kinematics != "drive-model":
+        return None
+    from abu_model.loop_response import as_setpoints
+    from controller.drive import load_drive
+    from controller.reference import Staircase
+    from measurement.kinematics.drive_model import DriveModelInput
+
+    if not args.drive:
+        raise ParameterError("--drive", None, "a drive.json ('abu identify') with "
+                             "--kinematics drive-model")
+    for opt, value in (("--omega0-hz", args.omega0_hz), ("--omega-end-hz", args.omega_end_hz),
+                       ("--te", args.te)):
+        if value is None or not math.isfinite(value):
+            raise ParameterError(opt, value, "a finite number (the staircase the drive "
+                                 "followed) with --kinematics drive-model")
+    if args.omega0_hz == 0 or not args.step_hz > 0 or not args.te > 0 \
+            or not math.isfinite(args.t0):
+        raise ParameterError("--omega0-hz/--step-hz/--te/--t0",
+                             (args.omega0_hz, args.step_hz, args.te, args.t0),
+                             "a non-zero speed, a step > 0 Hz, a duration > 0 s, a finite t0")
+    if args.omega_end_hz * args.omega0_hz <= 0:
+        raise ParameterError("--omega-end-hz", args.omega_end_hz,
+                             "a speed of the same sign as --omega0-hz (the drive turns one way)")
+    stair = Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0, args.te,
+                      step=args.step_hz * HZ, rounding=args.rounding)
+    return DriveModelInput(load_drive(args.drive), as_setpoints(stair))

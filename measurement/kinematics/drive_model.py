@@ -1,0 +1,303 @@
+"""omega and omega_dot from a physical model of the drive fitted to the whole record (SI).
+
+Where the drive is known (an identified closed speed loop, ``drive.json`` of ``abu identify``,
+driven by a known setpoint staircase), the ABU's motion over the whole record is
+
+    theta(t) = theta0 + c t + Theta(t - t_off; zeta, omega_n, tau, b)
+
+with Theta the loop's exact response to the staircase (:mod:`abu_model.loop_response`),
+t_off the record's time offset to the staircase (the camera's trigger) and c a constant speed
+offset [rad/s]. The unknowns are fitted by nonlinear least squares on the tracked theta,
+weighted by the tracking noise sigma_theta; a loop parameter with a 95 % interval in the drive
+file gets a Gaussian prior of that width, one without is free (within the physical range of
+:data:`controller.drive.UPPER`). omega(t) and omega_dot(t) come from the fitted model, their
+standard errors from the parameter covariance (the Jacobian, scaled up by the reduced
+chi-square when it exceeds 1) propagated through the model.
+
+**Honest when wrong.** A drive the model does not contain (a setpoint filter, torque ripple,
+a wrong lag held by a tight prior) leaves a systematic residual. The fit is *refused* when the
+residual is not white: for block lengths of 2, 8 and 32 ms the means of non-overlapping blocks
+of the normalised residual must be consistent with white noise of the residual's own spread
+(chi-square over the blocks, each at ``level / 3``), and the residual's spread must not exceed
+the tracking noise by more than ``max_rms_ratio``. A refused fit returns the reason; the caller
+then keeps the Savitzky-Golay kinematics (:mod:`measurement.kinematics.estimators`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from abu_model.loop_response import Setpoints, response
+from controller.drive import UPPER, Drive
+
+from measurement.kinematics.estimators import Kinematics, noise_sigma, sample_interval
+
+#: loop parameters: (file name, Drive attribute, lower bound)
+LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
+        ("tau_motor_s", "tau_motor", 0.0), ("setpoint_weight", "setpoint_weight", 1e-3))
+#: Block lengths of the whiteness test [s].
+BLOCKS_S = (0.002, 0.008, 0.032)
+
+
+@dataclass(frozen=True)
+class DriveModelSettings:
+    """Settings of the drive-model fit.
+
+    Attributes:
+        level: false-refusal level of the whiteness test (all block lengths together) [-].
+        max_rms_ratio: largest accepted residual rms / tracking noise [-].
+        t_off_max_s: the record's time offset to the staircase is fitted within +- this [s].
+        free_loop: fit every loop parameter freely (ignore the drive file's intervals).
+        harmonics: harmonics of theta fitted as a fixed pattern of the camera (lens, axis).
+        max_evaluations: most model evaluations of the least squares.
+        error_rel: a model-discrepancy floor on omega_dot's standard error, relative to
+            |omega_dot| [-] (default 1 %: a lag 30 % off held by a tight interval is not
+            refused and errs by ~0.1 %; 0: the parameter covariance alone).
+        check_white: refuse a fit whose residual is not white (off: only a fit that did not
+            converge or whose residual rms exceeds ``max_rms_ratio`` is refused).
+    """
+
+    level: float = 0.001
+    max_rms_ratio: float = 1.25
+    t_off_max_s: float = 0.05
+    free_loop: bool = False
+    harmonics: int = 3
+    max_evaluations: int = 200
+    error_rel: float = 0.01
+    check_white: bool = True
+
+
+@dataclass
+class DriveFit:
+    """Result of :func:`fit_drive_model`.
+
+    Attributes:
+        accepted: the residual passed the whiteness test.
+        why: the reason of a refusal ('' when accepted).
+        params: fitted values by name (theta0_rad, t_off_s, omega_offset_rad_s and the loop's).
+        std: their standard errors.
+        omega, omega_dot, sigma_omega, sigma_omega_dot: at the frame times [rad/s, rad/s^2].
+        rms_ratio: residual rms / tracking noise [-]; block_p: whiteness p-value per block [s].
+    """
+
+    accepted: bool
+    why: str
+    params: dict[str, float] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    omega: np.ndarray | None = None
+    omega_dot: np.ndarray | None = None
+    sigma_omega: np.ndarray | None = None
+    sigma_omega_dot: np.ndarray | None = None
+    rms_ratio: float = math.nan
+    block_p: dict[str, float] = field(default_factory=dict)
+    residual: np.ndarray | None = None
+
+    def summary(self) -> dict:
+        """JSON-ready record for summary.json's ``estimator.model``."""
+        return {"model": "accepted" if self.accepted else "refused", "why": self.why,
+                "params": self.params, "std": self.std, "rms_ratio": self.rms_ratio,
+                "whiteness_p": self.block_p}
+
+
+@dataclass(frozen=True)
+class DriveModelInput:
+    """What the drive-model kinematics need: the identified loop, the staircase it was driven
+    by (times on the record's clock, levels [rad/s]) and the fit's settings."""
+
+    drive: Drive
+    setpoints: Setpoints
+    settings: DriveModelSettings = field(default_factory=DriveModelSettings)
+
+
+class _Model:
+    """theta, omega, omega_dot of the parametrised drive at the frame times."""
+
+    def __init__(self, time: np.ndarray, drive: Drive, setpoints: Setpoints,
+                 settings: DriveModelSettings):
+        self.t, self.sp = time, setpoints
+        self.names = ["t_off_s"]
+        self.x0 = [0.0]
+        self.lo = [-settings.t_off_max_s]
+        self.hi = [settings.t_off_max_s]
+        self.prior: list[tuple[int, float, float]] = []   # (index, centre, sigma)
+        for name, attr, low in LOOP:
+            value = float(getattr(drive, attr))
+            if name == "tau_motor_s" and drive.model == "second-order":
+                continue
+            if name == "setpoint_weight" and drive.model != "pi-lag-weighted":
+                continue
+            ci = drive.ci95.get(name)
+            if ci is not None and not settings.free_loop:
+                lo_ci, hi_ci = float(ci[0]), float(ci[1])
+                self.prior.append((len(self.names), 0.5 * (lo_ci + hi_ci),
+                                   max((hi_ci - lo_ci) / (2 * 1.959964), 1e-9)))
+            self.names.append(name)
+            self.x0.append(max(value, low + 1e-6))
+            self.lo.append(low)
+            self.hi.append(UPPER[name])
+        self.fixed = {"tau_motor_s": 0.0, "setpoint_weight": 1.0}
+
+    def loop(self, p: np.ndarray) -> tuple[float, float, float, float]:
+        v = dict(zip(self.names[1:], p[1:]))
+        return (v["zeta"], v["omega_n_rad_s"], v.get("tau_motor_s", 0.0),
+                v.get("setpoint_weight", 1.0))
+
+    def evaluate(self, p: np.ndarray, need_theta: bool = True):
+        """(Theta, omega, omega_dot) of the loop alone (no linear terms) at the frame times."""
+        zeta, wn, tau, b = self.loop(p)
+        r = response(self.sp, self.t - p[0], zeta, wn, tau, b, need_theta)
+        return (r.theta if need_theta else None), r.omega, r.alpha
+
+
+def _whiteness(res: np.ndarray, dt: float) -> dict[str, float]:
+    """p-value per block length of 'the block means are those of white noise'."""
+    from scipy.stats import chi2
+
+    s = float(np.std(res))
+    out = {}
+    for block_s in BLOCKS_S:
+        m = max(1, int(round(block_s / dt)))
+        k = res.size // m
+        if k < 4:
+            continue
+        means = res[: k * m].reshape(k, m).mean(axis=1)
+        stat = float(np.sum(means**2) * m / (s * s))
+        out[f"{block_s:g}"] = float(chi2.sf(stat, k))
+    return out
+
+
+def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints, *,
+                    sigma_theta: float | None = None,
+                    settings: DriveModelSettings | None = None) -> DriveFit:
+    """Fit the drive model to theta(t) over the whole record (see the module doc)."""
+    from scipy.optimize import least_squares
+
+    st = settings or DriveModelSettings()
+    t = np.asarray(time, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    dt = sample_interval(t)
+    sigma = noise_sigma(th) if sigma_theta is None else float(sigma_theta)
+    if not sigma > 0:
+        return DriveFit(False, "the tracking noise of theta is zero (cannot weight the fit)")
+    levels = np.asarray(setpoints.levels, float)
+    slope = float(np.polyfit(t, th, 1)[0])
+    if np.sign(slope) != np.sign(levels[0]) or np.any(np.sign(levels) != np.sign(levels[0])):
+        return DriveFit(False, f"the record turns at {slope:.4g} rad/s on average, the "
+                               f"staircase from {levels[0]:.4g} rad/s: not the same direction")
+    model = _Model(t, drive, setpoints, st)
+    # linear nuisance terms: theta0, a speed offset c t, and harmonics 1..3 of theta itself
+    # (a camera's lens and the eccentric axis put a fixed pattern on the tracked angle)
+    basis = _linear_basis(t, th, st.harmonics)
+    proj = np.linalg.pinv(basis)
+    prior_idx = np.array([i for i, _, _ in model.prior], int)
+    prior_c = np.array([c for _, c, _ in model.prior])
+    prior_s = np.array([s for _, _, s in model.prior])
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        e = th - model.evaluate(p)[0]
+        r = (e - basis @ (proj @ e)) / sigma
+        return np.concatenate([r, (p[prior_idx] - prior_c) / prior_s]) if prior_idx.size else r
+
+    lo, hi = np.array(model.lo), np.array(model.hi)
+    x0 = np.clip(np.array(model.x0, float), lo + 1e-9, hi - 1e-9)
+    try:
+        sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
+                            max_nfev=st.max_evaluations)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        return DriveFit(False, f"the fit failed: {exc}")
+    p = sol.x
+    e = th - model.evaluate(p)[0]
+    lin = proj @ e
+    res = (e - basis @ lin) / sigma
+    n_par = p.size + basis.shape[1]
+    rms_ratio = float(math.sqrt(np.sum(res**2) / max(res.size - n_par, 1)))
+    # full covariance of (nonlinear, linear) parameters from the full Jacobian and the prior
+    g_th, g_w, g_a = _output_jacobian(model, p)
+    jac = np.hstack([g_th, basis]) / sigma
+    info = jac.T @ jac
+    for i, _, s_i in model.prior:
+        info[i, i] += 1.0 / s_i**2
+    cov = np.linalg.pinv(info) * max(1.0, rms_ratio**2)
+    k = p.size
+    c_nl = cov[:k, :k]
+    # omega also carries the speed offset c (linear parameter 1)
+    g_w_full = np.hstack([g_w, np.zeros((t.size, 1)), np.ones((t.size, 1))])
+    cov_w = cov[np.ix_(list(range(k)) + [k, k + 1], list(range(k)) + [k, k + 1])]
+    _, omega, alpha = model.evaluate(p, need_theta=False)
+    omega = omega + lin[1]
+    se_w = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g_w_full, cov_w, g_w_full), 0.0))
+    se_a = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g_a, c_nl, g_a), 0.0))
+    se_a = np.hypot(se_a, st.error_rel * np.abs(alpha))
+    params = {n: float(v) for n, v in zip(model.names, p)}
+    params.update(theta0_rad=float(lin[0]), omega_offset_rad_s=float(lin[1]))
+    std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(model.names)}
+    std.update(theta0_rad=float(math.sqrt(cov[k, k])), omega_offset_rad_s=float(
+        math.sqrt(cov[k + 1, k + 1])))
+    block_p = _whiteness(res, dt)
+    fit = DriveFit(True, "", params, std, omega, alpha, se_w, se_a, rms_ratio, block_p,
+                   residual=res * sigma)
+    level_each = st.level / max(len(block_p), 1)
+    bad = [b for b, pv in block_p.items() if pv < level_each]
+    if not sol.success:
+        fit.accepted, fit.why = False, f"the fit did not converge ({sol.message})"
+    elif rms_ratio > st.max_rms_ratio:
+        fit.accepted, fit.why = False, (
+            f"residual rms {rms_ratio:.3g} x the tracking noise (accepted up to "
+            f"{st.max_rms_ratio:g}): the drive model does not describe the record")
+    elif bad and st.check_white:
+        fit.accepted, fit.why = False, (
+            f"residual not white: block means over {', '.join(b + ' s' for b in bad)} "
+            f"(p = {min(block_p[b] for b in bad):.2g} < {level_each:.2g}): a motion the drive "
+            "model does not contain")
+    return fit
+
+
+def _linear_basis(t: np.ndarray, theta: np.ndarray, harmonics: int) -> np.ndarray:
+    """Columns 1, t - mean(t), cos(k theta), sin(k theta) for k = 1..harmonics."""
+    cols = [np.ones_like(t), t - float(np.mean(t))]
+    for k in range(1, harmonics + 1):
+        cols += [np.cos(k * theta), np.sin(k * theta)]
+    return np.column_stack(cols)
+
+
+def _output_jacobian(model: _Model, p: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """d Theta / d p, d omega / d p and d omega_dot / d p at the frame times (central
+    differences)."""
+    outs = [np.zeros((model.t.size, p.size)) for _ in range(3)]
+    for j in range(p.size):
+        h = 1e-7 if j == 0 else 1e-6 * max(abs(p[j]), 1e-3)
+        up, down = p.copy(), p.copy()
+        up[j] += h
+        down[j] -= h
+        for out, v1, v0 in zip(outs, model.evaluate(up), model.evaluate(down)):
+            out[:, j] = (v1 - v0) / (2 * h)
+    return outs[0], outs[1], outs[2]
+
+
+def model_kinematics(fallback: Kinematics, theta: np.ndarray, drive: Drive,
+                     setpoints: Setpoints, settings: DriveModelSettings | None = None
+                     ) -> tuple[Kinematics, DriveFit]:
+    """The drive model's kinematics, or ``fallback`` (the Savitzky-Golay ones) when the fit
+    is refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
+    fit = fit_drive_model(fallback.time, theta, drive, setpoints,
+                          sigma_theta=fallback.sigma_theta, settings=settings)
+    info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
+            "why": fit.why}
+    if not fit.accepted:
+        return replace(fallback, settings=info), fit
+    return replace(fallback, omega=fit.omega, omega_dot=fit.omega_dot,
+                   sigma_omega=fit.sigma_omega, sigma_omega_dot=fit.sigma_omega_dot,
+                   bias_omega_dot=np.zeros_like(fit.omega_dot), method="drive-model",
+                   settings=info, omega_dot_rho=None), fit
+
+
+def apply(fallback: Kinematics, theta: np.ndarray, inp: DriveModelInput | None) -> Kinematics:
+    """The analysis's hook: the drive model's kinematics where ``inp`` is given and the fit
+    is accepted, else ``fallback`` (with the refusal's reason in its settings)."""
+    if inp is None:
+        return replace(fallback, settings={**fallback.settings, "model": "refused",
+                                           "why": "no drive and staircase given"})
+    return model_kinematics(fallback, theta, inp.drive, inp.setpoints, inp.settings)[0]
