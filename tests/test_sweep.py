@@ -121,3 +121,28 @@ def test_a_sweep_killed_after_its_csv_landed_finishes_when_run_again(fmu_dir, tm
     capsys.readouterr()
     assert main(argv[:2] + ["2e-3"] + argv[3:]) == 2  # another sweep: the CSV is not its own
     assert "already holds results" in capsys.readouterr().err
+
+
+def test_a_scheduler_that_cannot_be_reached_fails_fast_with_one_line(tmp_path):
+    """A well-formed address where no Dask scheduler listens (a closed port on loopback): the
+    real command exits 2 within seconds, one line naming --scheduler, nothing written."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "sweep.csv"
+    started = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "abu.cli.main", "sweep", "--mu", "2.75e-3",
+                           "--omega0-hz", "-17", "--scheduler", f"tcp://127.0.0.1:{port}",
+                           "--out", str(out)], capture_output=True, text=True, timeout=120)
+    elapsed = time.perf_counter() - started
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and "--scheduler" in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not out.exists() and not list(tmp_path.iterdir())
+    assert elapsed < 30, elapsed
