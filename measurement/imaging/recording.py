@@ -28,6 +28,7 @@ class Recording:
             file header, video container); None when the file gives none.
         bit_depth: bits per sample in a camera file (before conversion to 8 bits), else None.
         first_frame_time_s: time of the first frame after the camera's trigger [s], if known.
+        codec: a video container's FourCC (OpenCV ``CAP_PROP_FOURCC``), else None.
     """
 
     frames: np.ndarray
@@ -37,6 +38,7 @@ class Recording:
     fps_source: str | None = None
     bit_depth: int | None = None
     first_frame_time_s: float | None = None
+    codec: str | None = None
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])
