@@ -33,7 +33,7 @@ from abu_model.errors import ParameterError
 from measurement.imaging import tracking as T
 from measurement.imaging import window_fits as W
 
-BALL_METHODS = ("outline", "pair")
+BALL_METHODS = ("outline", "pair", "silhouette")
 DEFAULT_BALL_METHOD = "outline"
 #: Level of the silhouette as a fraction of the body level [-] (first fit).
 LEVEL = 0.33
@@ -135,6 +135,71 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     return a, b, r, reason
 
 
+def refine_silhouette(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ball's silhouette whatever its highlights: circle fit to the outermost point of each
+    of 36 rays where the ball differs from the plane by half its typical contrast.
+
+    For balls the ``outline`` fit cannot read (a body darker than the plane under diffuse
+    light, large or elongated highlights covering the body): |plane-corrected window|,
+    smoothed, is large anywhere on the ball (dark body, bright body, reflections) and at the
+    noise outside it; the highlights' edges inside the ball (where the contrast changes sign)
+    are passed over because only the outermost crossing of each ray counts. Two rounds, the
+    second from the first's centre. Returns a, b, r, reason as :func:`refine_outline`.
+    """
+    K, w, _ = G.shape
+    H, noise = _plane_corrected(G, geo)
+    A = np.abs(W.smooth3(H))                                 # pixel (i, j) at (i + 1, j + 1)
+    n_rays, step = 36, 0.5
+    ang = np.arange(n_rays) * (2 * np.pi / n_rays)
+    rho = np.arange(0.0, min(radius_px * 1.6 + 2.0, w / 2.0 - 1.5), step)
+    ca, sa = np.cos(ang), np.sin(ang)
+    a = np.full(K, (w - 3) / 2.0)
+    b = np.full(K, (w - 3) / 2.0)
+    r = np.full(K, np.nan)
+    rms = np.full(K, np.inf)
+    cnt = np.zeros(K)
+    ring_level = np.zeros(K)
+    for _round in range(2):
+        X = np.clip(a[:, None, None] + ca[None, :, None] * rho, 0, w - 3.001)
+        Y = np.clip(b[:, None, None] + sa[None, :, None] * rho, 0, w - 3.001)
+        ix, iy = np.floor(X).astype(np.int64), np.floor(Y).astype(np.int64)
+        fx, fy = X - ix, Y - iy
+        kk = np.arange(K)[:, None, None]
+        v = ((1 - fy) * ((1 - fx) * A[kk, iy, ix] + fx * A[kk, iy, ix + 1])
+             + fy * ((1 - fx) * A[kk, iy + 1, ix] + fx * A[kk, iy + 1, ix + 1]))
+        ring = (rho >= 0.5 * radius_px) & (rho <= 0.85 * radius_px)
+        # low: a dark body's contrast can be a fraction of the reflections' (the ring's
+        # median), and the silhouette is where the ball meets the plane's noise
+        ring_level = np.median(v[:, :, ring].reshape(K, -1), axis=1)
+        level = np.maximum(0.25 * ring_level, 1.6 * noise)
+        above = v >= level[:, None, None]
+        # the outermost sample above the level, and the crossing just outside it
+        last = v.shape[2] - 1 - np.argmax(above[:, :, ::-1], axis=2)
+        has = above.any(axis=2) & (last < v.shape[2] - 1)
+        j = np.clip(last, 0, v.shape[2] - 2)
+        v0 = np.take_along_axis(v, j[:, :, None], 2)[:, :, 0]
+        v1 = np.take_along_axis(v, (j + 1)[:, :, None], 2)[:, :, 0]
+        frac = np.clip((v0 - level[:, None]) / np.where(v0 - v1 > 0, v0 - v1, 1.0), 0.0, 1.0)
+        edge = rho[j] + frac * step
+        xs = (a[:, None] + ca * edge)[has]
+        ys = (b[:, None] + sa * edge)[has]
+        kidx = np.repeat(np.arange(K), n_rays).reshape(K, n_rays)[has]
+        a1, b1, r, rms, cnt = W.robust_circle(kidx, xs, ys, K)
+        ok = np.isfinite(a1) & np.isfinite(b1)
+        a, b = np.where(ok, a1, a), np.where(ok, b1, b)
+    reason = np.zeros(K, dtype=np.uint8)
+    # a shaded body leaves the silhouette less round than a marker's edge: 2x the residual
+    bad = ~np.isfinite(r) | (cnt < opts.min_points) | (rms > 2.0 * opts.max_residual)
+    bad |= np.abs(r - radius_px) > max(1.0, 0.3 * radius_px)
+    reason[bad] = T.FIT_FAILED
+    # the ball (reflections included) against the tracker's contrast floor, and its ring
+    # against the noise (~7 sigma of the smoothed noise; the level sits at >= 4 sigma)
+    reason[(A.reshape(K, -1).max(axis=1) < opts.min_contrast) | (ring_level < 3.0 * noise)] = \
+        T.LOW_CONTRAST
+    return a + 1.0, b + 1.0, r, reason
+
+
 def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 36,
                    span: float = 2.0, step: float = 0.5
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -196,11 +261,85 @@ def _ball_window(radius_px: float) -> int:
     return int(2 * np.ceil(radius_px) + 10)
 
 
+def _refine(G: np.ndarray, geo, opts: "T.TrackingOptions", ball_method: str,
+            radius_px: float, final: bool) -> tuple[np.ndarray, ...]:
+    if ball_method == "pair":
+        return refine_pair(G, geo, opts)
+    if ball_method == "silhouette":
+        return refine_silhouette(G, geo, opts, radius_px)
+    # the radial-profile refit only in the final pass (the first one re-centres)
+    return refine_outline(G, geo, opts, radius_px, edges=final)
+
+
+def _one_pass(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, reason0: np.ndarray,
+              geo, ws: int, opts: "T.TrackingOptions", ball_method: str, radius_px: float,
+              final: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One pass over the frames with windows of side ``ws`` centred on (cx, cy) [px]."""
+    n, hgt, wid = frames.shape
+    half = ws // 2
+    X, Y, R = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    reason = reason0.copy()
+    for start in range(0, n, T.BATCH_FRAMES):
+        stop = min(n, start + T.BATCH_FRAMES)
+        x0 = np.rint(cx[start:stop]).astype(np.int64) - half
+        y0 = np.rint(cy[start:stop]).astype(np.int64) - half
+        inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
+        x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
+        G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
+                     ws).astype(np.float32)
+        a, b, r, code = _refine(G, geo, opts, ball_method, radius_px, final)
+        code[~inside] = T.OUTSIDE
+        code = np.where(code != T.OK, code, reason0[start:stop])
+        X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
+        reason[start:stop] = code
+    return X, Y, R, reason
+
+
+#: Frames per step of :func:`_follow_silhouette` (the ball moves < 1 px per frame).
+FOLLOW_FRAMES = 4
+
+
+def _follow_silhouette(frames: np.ndarray, seed: np.ndarray, geo, ws: int,
+                       opts: "T.TrackingOptions", radius_px: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 1) x, y [px]: the silhouette followed from the seed, a few frames at a time, each
+    step's windows centred on the last good position (kept where a frame is lost)."""
+    n = frames.shape[0]
+    xs, ys = np.empty((n, 1)), np.empty((n, 1))
+    px, py, k_last = float(seed[0]), float(seed[1]), 0
+    vx = vy = 0.0                                  # [px/frame] from the last two good steps
+    for start in range(0, n, FOLLOW_FRAMES):
+        stop = min(n, start + FOLLOW_FRAMES)
+        m = stop - start
+        ahead = start + 0.5 * m - k_last             # frames from the last good one
+        qx, qy = px + vx * ahead, py + vy * ahead
+        X, Y, _, reason = _one_pass(frames[start:stop], np.full(m, qx), np.full(m, qy),
+                                    np.zeros(m, np.uint8), geo, ws, opts, "silhouette",
+                                    radius_px, False)
+        ok = reason == T.OK
+        xs[start:stop, 0] = np.where(ok, X, qx)
+        ys[start:stop, 0] = np.where(ok, Y, qy)
+        if ok.any():
+            k = start + int(np.flatnonzero(ok)[-1])
+            if k > k_last:
+                vx = (float(X[ok][-1]) - px) / (k - k_last) if start else 0.0
+                vy = (float(Y[ok][-1]) - py) / (k - k_last) if start else 0.0
+            px, py, k_last = float(X[ok][-1]), float(Y[ok][-1]), k
+    return xs, ys
+
+
+#: Frames on which the ``outline`` fit is tried before the tracker falls back to the
+#: ``silhouette`` (if the outline fails in more than half of them).
+PROBE_FRAMES = 64
+
+
 def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
                radius_px: float | None = None, window: int = T.DEFAULT_WINDOW,
                options: "T.TrackingOptions | None" = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ball centre per frame under two reflections: x, y [px], radius/separation, reason."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """Ball centre per frame under two reflections: x, y [px], radius/separation, reason and
+    the method used (``outline`` falls back to ``silhouette`` for the whole recording when it
+    fails on most of the first :data:`PROBE_FRAMES` frames: a dark ball, large highlights)."""
     if ball_method not in BALL_METHODS:
         raise ParameterError("--ball-method", ball_method, f"one of {', '.join(BALL_METHODS)}")
     opts = options or T.TrackingOptions()
@@ -210,42 +349,35 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
     if radius_px is None:
         radius_px = _estimate_radius(frames[0], seed[0])
     ws = _ball_window(radius_px)
-    n, hgt, wid = frames.shape
-    half = ws // 2
     geo = W.WindowGeometry.make(ws)
-    X = np.full(n, np.nan)
-    Y = np.full(n, np.nan)
-    R = np.full(n, np.nan)
-    reason = reason0[:, 0].copy()
+    if ball_method == "outline":
+        m = min(frames.shape[0], PROBE_FRAMES)
+        probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0], geo, ws, opts,
+                          "outline", radius_px, False)[3]
+        if np.mean(probe != T.OK) > 0.5:
+            ball_method = "silhouette"
+            radius_px = _estimate_radius(frames[0], seed[0], method="silhouette")
+            ws = _ball_window(radius_px)
+            geo = W.WindowGeometry.make(ws)
+            # the seeded centroid follows the bright pixels, which on a dark ball with faint
+            # reflections are noise: follow the silhouette itself from the seed instead
+            xs, ys = _follow_silhouette(frames, seed[0], geo, ws, opts, radius_px)
+            reason0 = np.zeros_like(reason0)
     # two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
     # second pass re-centres the window on the first estimate
     cx, cy = xs[:, 0], ys[:, 0]
     for final in (False, True):
-        for start in range(0, n, T.BATCH_FRAMES):
-            stop = min(n, start + T.BATCH_FRAMES)
-            x0 = np.rint(cx[start:stop]).astype(np.int64) - half
-            y0 = np.rint(cy[start:stop]).astype(np.int64) - half
-            inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
-            x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
-            G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
-                          ws).astype(np.float32)
-            if ball_method == "pair":
-                a, b, r, code = refine_pair(G, geo, opts)
-            else:
-                # the radial-profile refit only in the final pass (the first one re-centres)
-                a, b, r, code = refine_outline(G, geo, opts, radius_px, edges=final)
-            code[~inside] = T.OUTSIDE
-            code = np.where(code != T.OK, code, reason0[start:stop, 0])
-            X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
-            reason[start:stop] = code
+        X, Y, R, reason = _one_pass(frames, cx, cy, reason0[:, 0], geo, ws, opts, ball_method,
+                                    radius_px, final)
         ok = reason == T.OK
         cx = np.where(ok, X, xs[:, 0])
         cy = np.where(ok, Y, ys[:, 0])
-    return X, Y, R, reason
+    return X, Y, R, reason, ball_method
 
 
-def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) -> float:
-    """The ball's image radius [px] from frame 0 (outline fit in a generous window)."""
+def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0,
+                     method: str = "outline") -> float:
+    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window)."""
     for ws in (24, 20, 16):
         x0, y0 = int(round(seed[0])) - ws // 2, int(round(seed[1])) - ws // 2
         if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
@@ -253,7 +385,9 @@ def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) 
         G = frame[None, y0:y0 + ws, x0:x0 + ws].astype(np.float32)
         geo = W.WindowGeometry.make(ws)
         for guess in (default, 4.0, 6.0):
-            a, b, r, code = refine_outline(G, geo, T.TrackingOptions(), guess)
+            a, b, r, code = (refine_outline(G, geo, T.TrackingOptions(), guess)
+                             if method == "outline" else
+                             refine_silhouette(G, geo, T.TrackingOptions(), guess))
             if code[0] == T.OK:
                 return float(r[0])
     return default
@@ -277,7 +411,7 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
     opts = options or T.TrackingOptions()
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
-    X, Y, R, reason = track_ball(frames, seeds[2], ball_method=ball_method,
+    X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
                                  radius_px=radius_px, window=window, options=opts)
     Xa = np.column_stack([tr.x, X])
     Ya = np.column_stack([tr.y, Y])
@@ -288,7 +422,7 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
     nan = np.nan
     return T.Tracks(x=np.where(lost, nan, Xa), y=np.where(lost, nan, Ya), lost=lost,
                     reason=reasons, radius=np.where(lost, nan, Ra),
-                    method=f"{method}+{ball_method}", window=window, dark=False, options=opts)
+                    method=f"{method}+{used}", window=window, dark=False, options=opts)
 
 
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
