@@ -345,6 +345,10 @@ def test_ball_centre_accuracy_under_each_lighting():
         print(f"  {name:18s} RMS {med[name]:.3f} [{np.nanmin(a[:, 0]):.3f}-"
               f"{np.nanmax(a[:, 0]):.3f}]  bias {np.nanmedian(a[:, 1]):.3f}  "
               f"lost {int(a[:, 2].sum())}/{len(r) * 400}")
+    # the README's figures (median RMS over the seeds: ring 0.28, pair 0.46, outline 0.12 px)
+    for name, readme in (("ring/default", 0.28), ("two_spot/pair", 0.46),
+                         ("two_spot/outline", 0.12)):
+        assert med[name] == pytest.approx(readme, abs=0.02), (name, med[name])
     out = np.array(rows["two_spot/outline"], dtype=float)
     pair = np.array(rows["two_spot/pair"], dtype=float)
     assert med["two_spot/outline"] < 0.7 * med["two_spot/pair"]   # better than the report's way

@@ -19,6 +19,13 @@ ball centre (``ball_method``):
   levels (robust to one side of the body being dimmer), with outlier rejection. The outline
   does not depend on where the reflections are, only (weakly) on the shading of the body.
 
+* ``silhouette`` (:mod:`silhouette`): the outermost point of each ray where the ball differs
+  from the plane, dark or bright: for balls the outline cannot read (a body darker than the
+  plane under diffuse light, highlights covering the body; the second highlight model
+  :mod:`twin.lighting_alt`). ``outline`` falls back to it for the whole recording when it
+  fails on most of the first frames or loses more than 2 % of them (then only if the
+  silhouette loses fewer), so recordings the outline reads keep their results.
+
 :func:`track_with_reflections` tracks the ABU centre and CD markers with the default tracker
 and the ball with one of these, returning ordinary :class:`tracking.Tracks` (3 markers). A
 ball window without two reflections (``pair``) or without a plausible outline (``outline``)
@@ -32,6 +39,7 @@ from abu_model.errors import ParameterError
 
 from measurement.imaging import tracking as T
 from measurement.imaging import window_fits as W
+from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
 
 BALL_METHODS = ("outline", "pair", "silhouette")
 DEFAULT_BALL_METHOD = "outline"
@@ -43,15 +51,6 @@ EDGE_REFINE = True
 EDGE_MODE = "local"
 #: Reason code for a ball window without two separate reflections.
 NO_PAIR = T.FIT_FAILED
-
-
-def _plane_corrected(G: np.ndarray, geo: "W.WindowGeometry") -> tuple[np.ndarray, np.ndarray]:
-    K, w, _ = G.shape
-    flat = G.reshape(K, w * w)
-    ring = flat[:, geo.ring]
-    coef = np.einsum("kp,cp->kc", ring, geo.plane_pinv)
-    noise = (ring - np.einsum("kc,cp->kp", coef, geo.plane_basis[:, geo.ring])).std(axis=1)
-    return (flat - np.einsum("kc,cp->kp", coef, geo.plane_basis)).reshape(K, w, w), noise
 
 
 def refine_pair(G: np.ndarray, geo, opts: "T.TrackingOptions"
@@ -133,71 +132,6 @@ def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: flo
     reason[touches] = T.TOUCHES_EDGE
     reason[(body < opts.min_contrast) | (body < opts.min_snr * noise)] = T.LOW_CONTRAST
     return a, b, r, reason
-
-
-def refine_silhouette(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The ball's silhouette whatever its highlights: circle fit to the outermost point of each
-    of 36 rays where the ball differs from the plane by half its typical contrast.
-
-    For balls the ``outline`` fit cannot read (a body darker than the plane under diffuse
-    light, large or elongated highlights covering the body): |plane-corrected window|,
-    smoothed, is large anywhere on the ball (dark body, bright body, reflections) and at the
-    noise outside it; the highlights' edges inside the ball (where the contrast changes sign)
-    are passed over because only the outermost crossing of each ray counts. Two rounds, the
-    second from the first's centre. Returns a, b, r, reason as :func:`refine_outline`.
-    """
-    K, w, _ = G.shape
-    H, noise = _plane_corrected(G, geo)
-    A = np.abs(W.smooth3(H))                                 # pixel (i, j) at (i + 1, j + 1)
-    n_rays, step = 36, 0.5
-    ang = np.arange(n_rays) * (2 * np.pi / n_rays)
-    rho = np.arange(0.0, min(radius_px * 1.6 + 2.0, w / 2.0 - 1.5), step)
-    ca, sa = np.cos(ang), np.sin(ang)
-    a = np.full(K, (w - 3) / 2.0)
-    b = np.full(K, (w - 3) / 2.0)
-    r = np.full(K, np.nan)
-    rms = np.full(K, np.inf)
-    cnt = np.zeros(K)
-    ring_level = np.zeros(K)
-    for _round in range(2):
-        X = np.clip(a[:, None, None] + ca[None, :, None] * rho, 0, w - 3.001)
-        Y = np.clip(b[:, None, None] + sa[None, :, None] * rho, 0, w - 3.001)
-        ix, iy = np.floor(X).astype(np.int64), np.floor(Y).astype(np.int64)
-        fx, fy = X - ix, Y - iy
-        kk = np.arange(K)[:, None, None]
-        v = ((1 - fy) * ((1 - fx) * A[kk, iy, ix] + fx * A[kk, iy, ix + 1])
-             + fy * ((1 - fx) * A[kk, iy + 1, ix] + fx * A[kk, iy + 1, ix + 1]))
-        ring = (rho >= 0.5 * radius_px) & (rho <= 0.85 * radius_px)
-        # low: a dark body's contrast can be a fraction of the reflections' (the ring's
-        # median), and the silhouette is where the ball meets the plane's noise
-        ring_level = np.median(v[:, :, ring].reshape(K, -1), axis=1)
-        level = np.maximum(0.25 * ring_level, 1.6 * noise)
-        above = v >= level[:, None, None]
-        # the outermost sample above the level, and the crossing just outside it
-        last = v.shape[2] - 1 - np.argmax(above[:, :, ::-1], axis=2)
-        has = above.any(axis=2) & (last < v.shape[2] - 1)
-        j = np.clip(last, 0, v.shape[2] - 2)
-        v0 = np.take_along_axis(v, j[:, :, None], 2)[:, :, 0]
-        v1 = np.take_along_axis(v, (j + 1)[:, :, None], 2)[:, :, 0]
-        frac = np.clip((v0 - level[:, None]) / np.where(v0 - v1 > 0, v0 - v1, 1.0), 0.0, 1.0)
-        edge = rho[j] + frac * step
-        xs = (a[:, None] + ca * edge)[has]
-        ys = (b[:, None] + sa * edge)[has]
-        kidx = np.repeat(np.arange(K), n_rays).reshape(K, n_rays)[has]
-        a1, b1, r, rms, cnt = W.robust_circle(kidx, xs, ys, K)
-        ok = np.isfinite(a1) & np.isfinite(b1)
-        a, b = np.where(ok, a1, a), np.where(ok, b1, b)
-    reason = np.zeros(K, dtype=np.uint8)
-    # a shaded body leaves the silhouette less round than a marker's edge: 2x the residual
-    bad = ~np.isfinite(r) | (cnt < opts.min_points) | (rms > 2.0 * opts.max_residual)
-    bad |= np.abs(r - radius_px) > max(1.0, 0.3 * radius_px)
-    reason[bad] = T.FIT_FAILED
-    # the ball (reflections included) against the tracker's contrast floor, and its ring
-    # against the noise (~7 sigma of the smoothed noise; the level sits at >= 4 sigma)
-    reason[(A.reshape(K, -1).max(axis=1) < opts.min_contrast) | (ring_level < 3.0 * noise)] = \
-        T.LOW_CONTRAST
-    return a + 1.0, b + 1.0, r, reason
 
 
 def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n_rays: int = 36,
@@ -333,46 +267,71 @@ def _follow_silhouette(frames: np.ndarray, seed: np.ndarray, geo, ws: int,
 PROBE_FRAMES = 64
 
 
+#: Share of lost frames above which an ``outline`` track is redone with the ``silhouette`` (the
+#: analysis interpolates at most 2 % of the frames).
+MAX_LOST_SHARE = 0.02
+
+
+def _passes(frames: np.ndarray, xs: np.ndarray, ys: np.ndarray, reason0: np.ndarray,
+            opts: "T.TrackingOptions", ball_method: str, radius_px: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
+    second pass re-centres the window on the first estimate."""
+    ws = _ball_window(radius_px)
+    geo = W.WindowGeometry.make(ws)
+    cx, cy = xs, ys
+    for final in (False, True):
+        X, Y, R, reason = _one_pass(frames, cx, cy, reason0, geo, ws, opts, ball_method,
+                                    radius_px, final)
+        ok = reason == T.OK
+        cx = np.where(ok, X, xs)
+        cy = np.where(ok, Y, ys)
+    return X, Y, R, reason
+
+
+def _silhouette_track(frames: np.ndarray, seed: np.ndarray, opts: "T.TrackingOptions"
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ``silhouette`` track, followed from the seed (the seeded centroid follows the
+    bright pixels, which on a dark ball with faint reflections are noise)."""
+    radius_px = _estimate_radius(frames[0], seed, method="silhouette")
+    ws = _ball_window(radius_px)
+    xs, ys = _follow_silhouette(frames, seed, W.WindowGeometry.make(ws), ws, opts, radius_px)
+    return _passes(frames, xs[:, 0], ys[:, 0], np.zeros(frames.shape[0], np.uint8), opts,
+                   "silhouette", radius_px)
+
+
 def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
                radius_px: float | None = None, window: int = T.DEFAULT_WINDOW,
                options: "T.TrackingOptions | None" = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
     """Ball centre per frame under two reflections: x, y [px], radius/separation, reason and
-    the method used (``outline`` falls back to ``silhouette`` for the whole recording when it
-    fails on most of the first :data:`PROBE_FRAMES` frames: a dark ball, large highlights)."""
+    the method used. ``outline`` falls back to ``silhouette`` for the whole recording when it
+    fails on most of the first :data:`PROBE_FRAMES` frames (a dark ball, large highlights) or
+    loses more than :data:`MAX_LOST_SHARE` of all frames and the silhouette loses fewer."""
     if ball_method not in BALL_METHODS:
         raise ParameterError("--ball-method", ball_method, f"one of {', '.join(BALL_METHODS)}")
     opts = options or T.TrackingOptions()
     seed = np.asarray(seed, dtype=float).reshape(1, 2)
     frames, seed, window = T._check_inputs(frames, seed, window, "moments")
+    if ball_method == "silhouette":
+        return (*_silhouette_track(frames, seed[0], opts), ball_method)
     xs, ys, reason0 = T._seeded_moments(frames, seed, window, False, opts)
     if radius_px is None:
         radius_px = _estimate_radius(frames[0], seed[0])
-    ws = _ball_window(radius_px)
-    geo = W.WindowGeometry.make(ws)
     if ball_method == "outline":
         m = min(frames.shape[0], PROBE_FRAMES)
-        probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0], geo, ws, opts,
-                          "outline", radius_px, False)[3]
+        ws = _ball_window(radius_px)
+        probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0],
+                          W.WindowGeometry.make(ws), ws, opts, "outline", radius_px, False)[3]
         if np.mean(probe != T.OK) > 0.5:
-            ball_method = "silhouette"
-            radius_px = _estimate_radius(frames[0], seed[0], method="silhouette")
-            ws = _ball_window(radius_px)
-            geo = W.WindowGeometry.make(ws)
-            # the seeded centroid follows the bright pixels, which on a dark ball with faint
-            # reflections are noise: follow the silhouette itself from the seed instead
-            xs, ys = _follow_silhouette(frames, seed[0], geo, ws, opts, radius_px)
-            reason0 = np.zeros_like(reason0)
-    # two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
-    # second pass re-centres the window on the first estimate
-    cx, cy = xs[:, 0], ys[:, 0]
-    for final in (False, True):
-        X, Y, R, reason = _one_pass(frames, cx, cy, reason0[:, 0], geo, ws, opts, ball_method,
-                                    radius_px, final)
-        ok = reason == T.OK
-        cx = np.where(ok, X, xs[:, 0])
-        cy = np.where(ok, Y, ys[:, 0])
-    return X, Y, R, reason, ball_method
+            return (*_silhouette_track(frames, seed[0], opts), "silhouette")
+    out = _passes(frames, xs[:, 0], ys[:, 0], reason0[:, 0], opts, ball_method, radius_px)
+    lost = np.mean(out[3] != T.OK)
+    if ball_method == "outline" and lost > MAX_LOST_SHARE:
+        alt = _silhouette_track(frames, seed[0], opts)
+        if np.mean(alt[3] != T.OK) < lost:
+            return (*alt, "silhouette")
+    return (*out, ball_method)
 
 
 def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0,
