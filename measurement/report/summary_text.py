@@ -18,8 +18,10 @@ def describe_measurement(s: dict) -> str:
                      f"({mf['status']}), slip onset {fmt_value(mf['t_slip'], '.4f')} s; mu_d = "
                      f"{fmt_value(s.get('mu_d'))} in [{fmt_value(s.get('mu_d_low'))}, "
                      f"{fmt_value(s.get('mu_d_high'))}]")
-        lines.append(f"  report's running max (point-wise bounds, no coverage guarantee): "
-                     f"[{fmt_value(rm['mu_low'])}, {fmt_value(rm['mu_high'])}] ({rm['status']})")
+        lines.append(f"  report's running max: [{fmt_value(rm['mu_low'])}, "
+                     f"{fmt_value(rm['mu_high'])}] ({rm['status']}"
+                     + ("" if "no coverage" in rm["status"] else "; no coverage guarantee")
+                     + ")")
     lines.append(f"  t_slip_low = {fmt_value(s['t_slip_low'], '.4f')} s (last surely stuck), "
                  f"t_slip_high = {fmt_value(s['t_slip_high'], '.4f')} s (first surely slipping)"
                  + (f", {100 * conf:g} % confidence" if conf is not None and mf else
