@@ -238,7 +238,11 @@ def report(rows: list[dict], label: str) -> None:
         # how close the nearest bound comes to mu (negative: a miss), relative to mu
         margins = [(r["mu"] - r[lo_k]) / r["mu"] for r in ok if r[lo_k] is not None] + \
             [(r[hi_k] - r["mu"]) / r["mu"] for r in ok if r[hi_k] is not None]
-        print(f"  {name}: coverage {100 * cov:.1f} % ({len(ok)}), missing mu by > 2 %: "
+        # a null bound is no claim, not a hit: the share of finite intervals holding mu
+        hold = np.mean([r[lo_k] is not None and r[hi_k] is not None
+                        and r[lo_k] <= r["mu"] <= r[hi_k] for r in ok])
+        print(f"  {name}: coverage {100 * cov:.1f} % ({len(ok)}; finite and holding mu: "
+              f"{100 * hold:.1f} %), missing mu by > 2 %: "
               f"{sum(m > 0.02 for m in misses)}, worst miss {100 * max(misses):.1f} %, "
               f"closest bound {100 * min(margins) if margins else float('nan'):.1f} % from mu; "
               f"both bounds in {both}: relative width median "
