@@ -25,6 +25,7 @@ from abu_model.errors import ParameterError
 from abu_model.json_text import dumps
 
 from measurement.imaging import tracks_io
+from measurement.imaging.compression import lossy_status
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks
 from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
@@ -206,6 +207,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             lost for too long (the message names the recording and the reasons).
     """
     from measurement.imaging.frame_rate import resolve_frame_rate
+    from measurement.imaging.compression import detect
     from measurement.imaging.frames_io import read_recording
     from measurement.imaging.markers import format_seeds
     from measurement.imaging.reflections import track_markers
@@ -242,7 +244,8 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             "roles": list(ROLES), "method": tracks.method, "window_px": tracks.window,
             **_rate_info(rec, rate), "frames": int(time.size),
             "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
-            "lost_reasons": tracks.lost_summary()}
+            "lost_reasons": tracks.lost_summary(),
+            "compression": detect(frames, rec.codec).summary()}
     return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
 
 
@@ -319,6 +322,8 @@ def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float
                                     options=options)
     summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracks.info,
                **summary, **({"camera": camera_info} if camera_info else {})}
+    # a lossy recording is named in the status (the bounds are not coverage-tested on it)
+    summary["status"] = lossy_status(summary["status"], tracks.info.get("compression"))
     if drive is not None:
         summary["drive"] = drive
     return MeasureResult(tracks, table, summary)

@@ -24,8 +24,10 @@ from multiprocessing import get_context
 import numpy as np
 import pytest
 
-twin = pytest.importorskip("twin.report_twin")
+from twin import report_twin as twin  # noqa: E402  (a broken import must fail, not skip)
 
+#: The README's figure for this test (median relative width of the 50 intervals).
+README_MEDIAN_WIDTH = 0.138
 N_FRAMES = 1800
 N_RECORDINGS = 50
 REPORT_SINGLE_RUN_WIDTH = (0.0312 - 0.0286) / (0.5 * (0.0312 + 0.0286))  # 8.7 %
@@ -135,12 +137,18 @@ def test_intervals_from_rendered_recordings_contain_the_true_mu(simulated, recor
           f"{np.median([r['mu_high'] for r in runs]):.5f}]; tracking noise "
           f"{np.median([np.mean(r['sigma_px']) for r in runs]):.4f} px")
     assert all(r["lost"] == 0 for r in runs)
+    # informative: every run gives both bounds (a null bound is no hit), coverage >= 95 %
+    assert all(r["mu_low"] is not None and r["mu_high"] is not None for r in runs), runs
     assert coverage >= 0.95, [r for r, ok in zip(runs, contained) if not ok]
-    # The surely-slipping time never precedes the simulated slip instant.
-    assert all(r["t_slip_high"] >= t_slip for r in runs if r["t_slip_high"] is not None)
-    # Informative: the intervals are a few times narrower than +-25 % and within a small
-    # factor of the report's single-run width.
-    assert median_width < 0.25
+    # The onset bracket holds the simulated slip instant (a null end is no claim, but at most
+    # a few may be null).
+    both = [r for r in runs if r["t_slip_low"] is not None and r["t_slip_high"] is not None]
+    assert len(both) >= 0.9 * len(runs)
+    assert all(r["t_slip_low"] <= t_slip <= r["t_slip_high"] for r in both), \
+        [(r["t_slip_low"], r["t_slip_high"]) for r in both]
+    # The width the README quotes (13.8 %), within the spread of this figure between machines
+    # and versions; a doubled width or a biased marker fails here.
+    assert median_width < 1.15 * README_MEDIAN_WIDTH, median_width
 
 
 def truth_tracks_csv(folder, path):

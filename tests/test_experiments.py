@@ -38,6 +38,9 @@ def test_thesis_mode_reproduces_report_eq_4_9(fmu_dir):
     s = run_staircase(exp, fmu_dir).summary
     assert s["mu_low"] == pytest.approx(2.63e-3, rel=0.03)
     assert s["mu_high"] == pytest.approx(4.14e-3, rel=0.03)
+    # the README's table (its figures, not only the report's)
+    assert s["mu_low"] == pytest.approx(2.687e-3, rel=2e-3)
+    assert s["mu_high"] == pytest.approx(4.157e-3, rel=2e-3)
     assert s["mu_low"] <= 2.75e-3 < s["mu_high"]
     assert s["slip_at_setpoint_step"]
 
@@ -49,6 +52,9 @@ def test_integral_mode_matches_monolithic_reference(integral_run):
     assert s["mu_high"] == pytest.approx(ref.mu_high, rel=5e-3)
     assert s["t_slip"] == pytest.approx(ref.t_slip, abs=1e-6)
     assert s["mu_low"] <= exp.plant.ball.mu < s["mu_high"]
+    # the README's table, integral reading
+    assert s["mu_low"] == pytest.approx(2.667e-3, rel=2e-3)
+    assert s["mu_high"] == pytest.approx(3.262e-3, rel=2e-3)
     # The switches are the reference's, in order and direction.
     assert [(w["from_mode"], w["to_mode"]) for w in s["switches"]] == \
         [(w.from_mode, w.to_mode) for w in ref.switches]

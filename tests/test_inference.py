@@ -52,32 +52,62 @@ def scenario_tracks(seed: int, n_frames: int = 2400, light_scale: float = 1.0):
     return scn.times, x, y, scn.ball, state
 
 
-def test_coverage_of_the_stated_interval_on_the_harsh_family():
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+#: Seeds of the coverage test: a slice nothing was tuned on (the options were chosen on seeds
+#: 0-299 of the family; SLOW_ONSET_SEEDS below are picked from those).
+COVERAGE_SEEDS = range(4000, 4000 + N_COVERAGE)
+#: Ceiling of the median relative width at the tracks level (measured 25.7 % on these seeds;
+#: the rendered family's figure in the README is 34.9 %, wider through tracking and lighting).
+WIDTH_CEILING = 0.30
+#: Least share of informative results (both bounds finite).
+MIN_INFORMATIVE = 0.9
+
+
+def coverage_rows(seeds) -> list[dict]:
+    """One row per seed: the stated interval, whether it holds mu (both bounds needed: a null
+    bound is no hit), its miss and width."""
     rows = []
-    for seed in range(N_COVERAGE):
+    for seed in seeds:
         times, x, y, ball, state = scenario_tracks(seed)
         _, s = analyse_tracks(times, x, y, l=ball.l, d=ball.d)
         mu = ball.mu
         lo, hi = s["mu_low"], s["mu_high"]
-        inside = (lo is None or lo <= mu) and (hi is None or mu <= hi)
-        miss = 0.0 if inside else max((lo or 0.0) - mu, mu - (hi if hi is not None else 9)) / mu
-        rows.append({"seed": seed, "mu": mu, "lo": lo, "hi": hi, "inside": inside,
-                     "miss": miss, "status": s["status"], "width": s["relative_width"]})
+        both = lo is not None and hi is not None
+        inside = both and lo <= mu <= hi
+        miss = max((lo - mu) / mu if lo is not None else 0.0,
+                   (mu - hi) / mu if hi is not None else 0.0, 0.0)
+        t_true = float(state["switches"][0]) if len(state["switches"]) else None
+        rows.append({"seed": seed, "mu": mu, "lo": lo, "hi": hi, "both": both,
+                     "inside": inside, "miss": miss, "status": s["status"],
+                     "width": s["relative_width"], "t_true": t_true,
+                     "t_lo": s["t_slip_low"], "t_hi": s["t_slip_high"]})
         # a null bound is never reported as "ok"
-        assert (lo is not None and hi is not None) == (s["status"] == "ok"), s["status"]
+        assert both == (s["status"] == "ok"), s["status"]
+    return rows
+
+
+def test_coverage_of_the_stated_interval_on_the_harsh_family():
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    rows = coverage_rows(COVERAGE_SEEDS)
+    informative = float(np.mean([r["both"] for r in rows]))
     coverage = float(np.mean([r["inside"] for r in rows]))
     widths = [r["width"] for r in rows if r["width"] is not None]
     big = [r for r in rows if r["miss"] > 0.02]
+    onset = [r for r in rows if r["t_true"] is not None and r["t_lo"] is not None
+             and r["t_hi"] is not None]
+    onset_cov = float(np.mean([r["t_lo"] <= r["t_true"] <= r["t_hi"] for r in onset]))
     print(f"\nharsh-twin drives at the tracks level, {N_COVERAGE} recordings "
-          f"(twin.scenario seeds 0..{N_COVERAGE - 1}, 2400 frames): coverage of the "
-          f"stated 95 % interval {coverage:.0%}, missing mu by > 2 %: {len(big)}, median "
-          f"relative width {np.median(widths):.1%}, 90th percentile "
-          f"{np.percentile(widths, 90):.1%}, bounds null in "
-          f"{sum(r['status'] != 'ok' for r in rows)}")
+          f"(twin.scenario seeds {COVERAGE_SEEDS[0]}..{COVERAGE_SEEDS[-1]}, 2400 frames): "
+          f"both bounds in {informative:.0%}, coverage of the stated 95 % interval "
+          f"{coverage:.0%} (null bounds count as misses), missing mu by > 2 %: {len(big)}, "
+          f"median relative width {np.median(widths):.1%}, 90th percentile "
+          f"{np.percentile(widths, 90):.1%}; onset bracket holds the true onset in "
+          f"{onset_cov:.0%} of {len(onset)}")
+    assert informative >= MIN_INFORMATIVE, [r for r in rows if not r["both"]]
     assert coverage >= 0.90, [r for r in rows if not r["inside"]]
     # issue 7: no interval misses mu by more than 2 %
     assert not big, big
+    assert np.median(widths) < WIDTH_CEILING, np.median(widths)
+    assert len(onset) >= 0.6 * len(rows) and onset_cov >= 0.95, onset
 
 
 def test_never_slipping_record_has_a_null_upper_bound():
@@ -165,6 +195,25 @@ def test_slow_onsets_lower_bound_stays_below_mu():
           f"{[None if lo is None else round(100 * (lo / mu - 1), 1) for _, lo, mu, _ in rows]} %")
     assert all(st == "ok" for *_, st in rows), rows
     assert all(lo <= mu for _, lo, mu, _ in rows), rows
+
+
+def test_lower_bound_takes_the_sup_quantile_and_the_upper_the_pointwise_z():
+    """_bounds_and_status on a flat profile [a, b]: the lower bound is widened by the Rice sup
+    quantile z_lo (the largest error over the stretch that set it), the upper by the pointwise
+    z; the bias bounds add linearly (closed forms of scale_nuisance_bounds)."""
+    from measurement.inference.infer_mu import _bounds_and_status, _ProfileSet
+    from measurement.inference.kinematic_nuisance import KinematicNuisance
+    from measurement.inference.types import InferenceOptions
+
+    z = 1.959963984540054
+    grid = np.linspace(0.02, 0.03, 11)
+    pset = _ProfileSet(grid, np.zeros(11), 5, 1.0, np.zeros(11), np.arange(11))
+    nuis = KinematicNuisance(rel_noise=0.01, rel_bias=0.002, rel_noise_lo=0.02,
+                             rel_bias_lo=0.003, z_lo=3.1, reach_s=0.05)
+    lo, hi, status = _bounds_and_status(pset, nuis, False, False, z * z, InferenceOptions())
+    assert status == "ok"
+    assert lo == pytest.approx(0.02 * (1 - 3.1 * 0.02 - 0.003), rel=1e-12)
+    assert hi == pytest.approx(0.03 * (1 + z * 0.01 + 0.002), rel=1e-12)
 
 
 def test_rice_quantile_of_the_savgol_error_maximum_against_monte_carlo():

@@ -43,7 +43,7 @@ def test_clockwise_image_rotation_gives_negative_theta_rate():
 
 
 def test_angles_unwrap_over_many_turns_and_match_render_geometry():
-    render = pytest.importorskip("twin.render")
+    from twin import render
     geo = render.CameraGeometry()
     theta_true = -2 * math.pi * 15 * T          # ~10 turns clockwise
     beta_true = 2.9 + 0.5 * T                   # crosses pi: beta must not jump by 2 pi

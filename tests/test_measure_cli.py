@@ -183,7 +183,7 @@ def test_lost_marker_in_tracks_exits_2(tmp_path, capsys, record):
 # ------------------------------------------------------------------------------ frames input
 
 def rendered_stack(tmp_path, n=60, hide_ball=None):
-    render = pytest.importorskip("twin.render")
+    from twin import render
     geo = render.CameraGeometry()
     theta = -2 * math.pi * 9 * np.arange(n) / 4500
     beta = np.full(n, 0.6)
@@ -241,7 +241,7 @@ def test_track_lost_marker_names_the_frames(tmp_path, capsys):
 
 
 def test_unreadable_frame_in_a_folder_exits_2(tmp_path, capsys):
-    cv2 = pytest.importorskip("cv2")
+    import cv2
     folder = tmp_path / "frames"
     folder.mkdir()
     for i in range(3):

@@ -43,6 +43,8 @@ def test_next_proposes_a_run_that_narrows_the_interval(tmp_path, capsys, fmu_dir
           f"width {hi - lo:.3g} ({100 * (hi - lo) / width1:.0f} % of run 1's)")
     assert lo <= MU <= hi
     assert hi - lo < width1
+    # the README's figure: the combined interval is 32 % of run 1's width
+    assert (hi - lo) / width1 == pytest.approx(0.32, abs=0.01)
     # the predictor samples mu_req on the frame grid (1/4500 s), the co-simulation takes the
     # exact right limit at the setpoint step: they agree to well under 1 %
     assert hi - lo <= predicted * 1.01

@@ -35,7 +35,12 @@ from abu_model.errors import ParameterError
 from abu_model.params import BallParams
 
 from twin.drives import DriveSpec, first_slip_time, rotor_mu_req, simulate_drive
+from twin import lighting_alt
 from twin.lighting import LIGHTINGS, LightingSpec, ball_sprites, make_lamps, plane_irradiance
+
+#: Lightings ``random_scenario`` can be forced to: the first model's and the second model's
+#: two-reflection lighting (:mod:`twin.lighting_alt`, never drawn unforced).
+SCENARIO_LIGHTINGS = LIGHTINGS + (lighting_alt.KIND,)
 from twin.optics import OpticsSpec, Sensor, distort
 from twin.truth_csv import AXIS_COLUMNS, TRUTH_COLUMNS, truth_csv_text
 from twin.scene import OVERSAMPLE, Sprite, _pixel_integrated, add_patch, disk_sprite, \
@@ -53,7 +58,7 @@ class Scenario:
     seed: int
     ball: BallParams
     drive: DriveSpec
-    lighting: LightingSpec
+    lighting: LightingSpec | lighting_alt.AltLightingSpec
     optics: OpticsSpec
     beta0: float
     width: int = 256
@@ -148,8 +153,8 @@ def random_scenario(seed: int, *, size: int = 256, lighting: str | None = None,
     """
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < MIN_SIZE:
         raise ParameterError("size", size, f"an integer >= {MIN_SIZE} px")
-    if lighting is not None and lighting not in LIGHTINGS:
-        raise ParameterError("lighting", lighting, f"one of {', '.join(LIGHTINGS)}")
+    if lighting is not None and lighting not in SCENARIO_LIGHTINGS:
+        raise ParameterError("lighting", lighting, f"one of {', '.join(SCENARIO_LIGHTINGS)}")
     if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) \
             or n_frames < 1000:
         raise ParameterError("frames", n_frames, "an integer >= 1000 (the slip is placed at "
@@ -161,7 +166,10 @@ def random_scenario(seed: int, *, size: int = 256, lighting: str | None = None,
     times = np.arange(n_frames) / fps
     drive, t_pred = _draw_drive(rng, mu, times, ball)
     kind = lighting or ("two_spot" if rng.random() < 0.25 else "ring")
-    light = make_lamps(kind, rng, stray=rng.random() < 0.6)
+    light = make_lamps("two_spot" if kind == lighting_alt.KIND else kind, rng,
+                       stray=rng.random() < 0.6)
+    if kind == lighting_alt.KIND:   # the second model, drawn after the first (same stream)
+        light = lighting_alt.make_alt_lighting(rng)
     c = (size - 1) / 2.0
     ps = u(0.28e-3, 0.32e-3)
     # the CD marker >= 30 px outside the ball's path, so their tracking windows never overlap
@@ -216,14 +224,19 @@ def render_scenario_frames(scn: Scenario, state: dict[str, np.ndarray],
     w, h = scn.width, scn.height
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     ax, ay = scn.axis_xy
-    E = plane_irradiance(scn.lighting, (xx - ax) * scn.pixel_size, -(yy - ay) * scn.pixel_size)
-    s = scn.exposure_scale / (float(plane_irradiance(scn.lighting, np.zeros(1), np.zeros(1))[0])
+    alt = isinstance(scn.lighting, lighting_alt.AltLightingSpec)
+    plane_e, sprites_of = (lighting_alt.plane_irradiance, lighting_alt.ball_sprites) if alt \
+        else (plane_irradiance, ball_sprites)
+    E = plane_e(scn.lighting, (xx - ax) * scn.pixel_size, -(yy - ay) * scn.pixel_size)
+    s = scn.exposure_scale / (float(plane_e(scn.lighting, np.zeros(1), np.zeros(1))[0])
                               * scn.albedo_bg)
     bg = (s * scn.albedo_bg * E).astype(np.float32)
     mk = (s * (scn.albedo_marker - scn.albedo_bg) * E).astype(np.float32)
     n_phi = 96
-    sprites, _, half = ball_sprites(scn.lighting, scn.ball.l, scn.ball_radius_px,
-                                    0.5 * scn.ball.d, n_phi=n_phi, oversample=OVERSAMPLE)
+    sprites, _, half = sprites_of(scn.lighting, scn.ball.l, scn.ball_radius_px,
+                                  0.5 * scn.ball.d, n_phi=n_phi, oversample=OVERSAMPLE)
+    if alt:   # the second model's radiance is relative to the plane's
+        sprites = sprites * np.float32(scn.albedo_bg)
     ball_spr = Sprite(_pixel_integrated(sprites * np.float32(s), OVERSAMPLE), half)
     ball_cov = Sprite(*disk_sprite(scn.ball_radius_px))
     ball_cov.B = ball_cov.B[None]

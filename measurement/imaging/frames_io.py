@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 
+from measurement.imaging.compression import fourcc_text
 from measurement.imaging import sample_formats as fmt
 from measurement.imaging.frame_rate import rate_from_render_meta, rate_from_tiff
 from measurement.imaging.recording_checks import (  # noqa: F401  (re-exported names)
@@ -343,6 +344,7 @@ def _read_video(p: Path) -> Recording:
                 f"cannot read '{p}': not a folder of frames, a multi-page TIFF, a .npy stack or a "
                 "video file OpenCV can decode")
         fps = cap.get(cv2.CAP_PROP_FPS)
+        codec = fourcc_text(cap.get(cv2.CAP_PROP_FOURCC))
         frames = []
         while True:
             ok, img = cap.read()
@@ -366,4 +368,5 @@ def _read_video(p: Path) -> Recording:
     known = bool(np.isfinite(fps) and fps > 0)
     return Recording(np.stack(frames), f"video {p} (converted to grayscale)",
                      fps_source="none: a video container states only a playback rate",
-                     container_fps_hz=float(fps) if known else None)
+                     container_fps_hz=float(fps) if known else None,
+                     codec=codec)

@@ -31,6 +31,7 @@ class Recording:
         first_frame_time_s: time of the first frame after the camera's trigger [s], if known.
         container_fps_hz: a video container's (playback) rate [1/s]: reported, never used as
             the recording's rate.
+        codec: a video container's FourCC (OpenCV ``CAP_PROP_FOURCC``), else None.
     """
 
     frames: np.ndarray
@@ -41,6 +42,7 @@ class Recording:
     bit_depth: int | None = None
     first_frame_time_s: float | None = None
     container_fps_hz: float | None = None
+    codec: str | None = None
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])

@@ -19,6 +19,13 @@ ball centre (``ball_method``):
   levels (robust to one side of the body being dimmer), with outlier rejection. The outline
   does not depend on where the reflections are, only (weakly) on the shading of the body.
 
+* ``silhouette`` (:mod:`silhouette`): the outermost point of each ray where the ball differs
+  from the plane, dark or bright: for balls the outline cannot read (a body darker than the
+  plane under diffuse light, highlights covering the body; the second highlight model
+  :mod:`twin.lighting_alt`). ``outline`` falls back to it for the whole recording when it
+  fails on most of the first frames or loses more than 2 % of them (then only if the
+  silhouette loses fewer), so recordings the outline reads keep their results.
+
 :func:`track_with_reflections` tracks the ABU centre and CD markers with the default tracker
 and the ball with one of these, returning ordinary :class:`tracking.Tracks` (3 markers). A
 ball window without two reflections (``pair``) or without a plausible outline (``outline``)
@@ -32,8 +39,9 @@ from abu_model.errors import ParameterError
 
 from measurement.imaging import tracking as T
 from measurement.imaging import window_fits as W
+from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
 
-BALL_METHODS = ("outline", "pair")
+BALL_METHODS = ("outline", "pair", "silhouette")
 DEFAULT_BALL_METHOD = "outline"
 #: Level of the silhouette as a fraction of the body level [-] (first fit).
 LEVEL = 0.33
@@ -43,15 +51,6 @@ EDGE_REFINE = True
 EDGE_MODE = "local"
 #: Reason code for a ball window without two separate reflections.
 NO_PAIR = T.FIT_FAILED
-
-
-def _plane_corrected(G: np.ndarray, geo: "W.WindowGeometry") -> tuple[np.ndarray, np.ndarray]:
-    K, w, _ = G.shape
-    flat = G.reshape(K, w * w)
-    ring = flat[:, geo.ring]
-    coef = np.einsum("kp,cp->kc", ring, geo.plane_pinv)
-    noise = (ring - np.einsum("kc,cp->kp", coef, geo.plane_basis[:, geo.ring])).std(axis=1)
-    return (flat - np.einsum("kc,cp->kp", coef, geo.plane_basis)).reshape(K, w, w), noise
 
 
 def refine_pair(G: np.ndarray, geo, opts: "T.TrackingOptions"
@@ -196,56 +195,148 @@ def _ball_window(radius_px: float) -> int:
     return int(2 * np.ceil(radius_px) + 10)
 
 
+def _refine(G: np.ndarray, geo, opts: "T.TrackingOptions", ball_method: str,
+            radius_px: float, final: bool) -> tuple[np.ndarray, ...]:
+    if ball_method == "pair":
+        return refine_pair(G, geo, opts)
+    if ball_method == "silhouette":
+        return refine_silhouette(G, geo, opts, radius_px)
+    # the radial-profile refit only in the final pass (the first one re-centres)
+    return refine_outline(G, geo, opts, radius_px, edges=final)
+
+
+def _one_pass(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, reason0: np.ndarray,
+              geo, ws: int, opts: "T.TrackingOptions", ball_method: str, radius_px: float,
+              final: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One pass over the frames with windows of side ``ws`` centred on (cx, cy) [px]."""
+    n, hgt, wid = frames.shape
+    half = ws // 2
+    X, Y, R = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    reason = reason0.copy()
+    for start in range(0, n, T.BATCH_FRAMES):
+        stop = min(n, start + T.BATCH_FRAMES)
+        x0 = np.rint(cx[start:stop]).astype(np.int64) - half
+        y0 = np.rint(cy[start:stop]).astype(np.int64) - half
+        inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
+        x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
+        G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
+                     ws).astype(np.float32)
+        a, b, r, code = _refine(G, geo, opts, ball_method, radius_px, final)
+        code[~inside] = T.OUTSIDE
+        code = np.where(code != T.OK, code, reason0[start:stop])
+        X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
+        reason[start:stop] = code
+    return X, Y, R, reason
+
+
+#: Frames per step of :func:`_follow_silhouette` (the ball moves < 1 px per frame).
+FOLLOW_FRAMES = 4
+
+
+def _follow_silhouette(frames: np.ndarray, seed: np.ndarray, geo, ws: int,
+                       opts: "T.TrackingOptions", radius_px: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 1) x, y [px]: the silhouette followed from the seed, a few frames at a time, each
+    step's windows centred on the last good position (kept where a frame is lost)."""
+    n = frames.shape[0]
+    xs, ys = np.empty((n, 1)), np.empty((n, 1))
+    px, py, k_last = float(seed[0]), float(seed[1]), 0
+    vx = vy = 0.0                                  # [px/frame] from the last two good steps
+    for start in range(0, n, FOLLOW_FRAMES):
+        stop = min(n, start + FOLLOW_FRAMES)
+        m = stop - start
+        ahead = start + 0.5 * m - k_last             # frames from the last good one
+        qx, qy = px + vx * ahead, py + vy * ahead
+        X, Y, _, reason = _one_pass(frames[start:stop], np.full(m, qx), np.full(m, qy),
+                                    np.zeros(m, np.uint8), geo, ws, opts, "silhouette",
+                                    radius_px, False)
+        ok = reason == T.OK
+        xs[start:stop, 0] = np.where(ok, X, qx)
+        ys[start:stop, 0] = np.where(ok, Y, qy)
+        if ok.any():
+            k = start + int(np.flatnonzero(ok)[-1])
+            if k > k_last:
+                vx = (float(X[ok][-1]) - px) / (k - k_last) if start else 0.0
+                vy = (float(Y[ok][-1]) - py) / (k - k_last) if start else 0.0
+            px, py, k_last = float(X[ok][-1]), float(Y[ok][-1]), k
+    return xs, ys
+
+
+#: Frames on which the ``outline`` fit is tried before the tracker falls back to the
+#: ``silhouette`` (if the outline fails in more than half of them).
+PROBE_FRAMES = 64
+
+
+#: Share of lost frames above which an ``outline`` track is redone with the ``silhouette`` (the
+#: analysis interpolates at most 2 % of the frames).
+MAX_LOST_SHARE = 0.02
+
+
+def _passes(frames: np.ndarray, xs: np.ndarray, ys: np.ndarray, reason0: np.ndarray,
+            opts: "T.TrackingOptions", ball_method: str, radius_px: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
+    second pass re-centres the window on the first estimate."""
+    ws = _ball_window(radius_px)
+    geo = W.WindowGeometry.make(ws)
+    cx, cy = xs, ys
+    for final in (False, True):
+        X, Y, R, reason = _one_pass(frames, cx, cy, reason0, geo, ws, opts, ball_method,
+                                    radius_px, final)
+        ok = reason == T.OK
+        cx = np.where(ok, X, xs)
+        cy = np.where(ok, Y, ys)
+    return X, Y, R, reason
+
+
+def _silhouette_track(frames: np.ndarray, seed: np.ndarray, opts: "T.TrackingOptions"
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ``silhouette`` track, followed from the seed (the seeded centroid follows the
+    bright pixels, which on a dark ball with faint reflections are noise)."""
+    radius_px = _estimate_radius(frames[0], seed, method="silhouette")
+    ws = _ball_window(radius_px)
+    xs, ys = _follow_silhouette(frames, seed, W.WindowGeometry.make(ws), ws, opts, radius_px)
+    return _passes(frames, xs[:, 0], ys[:, 0], np.zeros(frames.shape[0], np.uint8), opts,
+                   "silhouette", radius_px)
+
+
 def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
                radius_px: float | None = None, window: int = T.DEFAULT_WINDOW,
                options: "T.TrackingOptions | None" = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ball centre per frame under two reflections: x, y [px], radius/separation, reason."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """Ball centre per frame under two reflections: x, y [px], radius/separation, reason and
+    the method used. ``outline`` falls back to ``silhouette`` for the whole recording when it
+    fails on most of the first :data:`PROBE_FRAMES` frames (a dark ball, large highlights) or
+    loses more than :data:`MAX_LOST_SHARE` of all frames and the silhouette loses fewer."""
     if ball_method not in BALL_METHODS:
         raise ParameterError("--ball-method", ball_method, f"one of {', '.join(BALL_METHODS)}")
     opts = options or T.TrackingOptions()
     seed = np.asarray(seed, dtype=float).reshape(1, 2)
     frames, seed, window = T._check_inputs(frames, seed, window, "moments")
+    if ball_method == "silhouette":
+        return (*_silhouette_track(frames, seed[0], opts), ball_method)
     xs, ys, reason0 = T._seeded_moments(frames, seed, window, False, opts)
     if radius_px is None:
         radius_px = _estimate_radius(frames[0], seed[0])
-    ws = _ball_window(radius_px)
-    n, hgt, wid = frames.shape
-    half = ws // 2
-    geo = W.WindowGeometry.make(ws)
-    X = np.full(n, np.nan)
-    Y = np.full(n, np.nan)
-    R = np.full(n, np.nan)
-    reason = reason0[:, 0].copy()
-    # two passes: the seeded centroid (reflections only) can sit 2-3 px off the centre; the
-    # second pass re-centres the window on the first estimate
-    cx, cy = xs[:, 0], ys[:, 0]
-    for final in (False, True):
-        for start in range(0, n, T.BATCH_FRAMES):
-            stop = min(n, start + T.BATCH_FRAMES)
-            x0 = np.rint(cx[start:stop]).astype(np.int64) - half
-            y0 = np.rint(cy[start:stop]).astype(np.int64) - half
-            inside = (x0 >= 0) & (y0 >= 0) & (x0 + ws <= wid) & (y0 + ws <= hgt)
-            x0c, y0c = np.clip(x0, 0, wid - ws), np.clip(y0, 0, hgt - ws)
-            G = W.gather(np.asarray(frames[start:stop]), np.arange(stop - start), x0c, y0c,
-                          ws).astype(np.float32)
-            if ball_method == "pair":
-                a, b, r, code = refine_pair(G, geo, opts)
-            else:
-                # the radial-profile refit only in the final pass (the first one re-centres)
-                a, b, r, code = refine_outline(G, geo, opts, radius_px, edges=final)
-            code[~inside] = T.OUTSIDE
-            code = np.where(code != T.OK, code, reason0[start:stop, 0])
-            X[start:stop], Y[start:stop], R[start:stop] = x0c + a, y0c + b, r
-            reason[start:stop] = code
-        ok = reason == T.OK
-        cx = np.where(ok, X, xs[:, 0])
-        cy = np.where(ok, Y, ys[:, 0])
-    return X, Y, R, reason
+    if ball_method == "outline":
+        m = min(frames.shape[0], PROBE_FRAMES)
+        ws = _ball_window(radius_px)
+        probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0],
+                          W.WindowGeometry.make(ws), ws, opts, "outline", radius_px, False)[3]
+        if np.mean(probe != T.OK) > 0.5:
+            return (*_silhouette_track(frames, seed[0], opts), "silhouette")
+    out = _passes(frames, xs[:, 0], ys[:, 0], reason0[:, 0], opts, ball_method, radius_px)
+    lost = np.mean(out[3] != T.OK)
+    if ball_method == "outline" and lost > MAX_LOST_SHARE:
+        alt = _silhouette_track(frames, seed[0], opts)
+        if np.mean(alt[3] != T.OK) < lost:
+            return (*alt, "silhouette")
+    return (*out, ball_method)
 
 
-def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) -> float:
-    """The ball's image radius [px] from frame 0 (outline fit in a generous window)."""
+def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0,
+                     method: str = "outline") -> float:
+    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window)."""
     for ws in (24, 20, 16):
         x0, y0 = int(round(seed[0])) - ws // 2, int(round(seed[1])) - ws // 2
         if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
@@ -253,7 +344,9 @@ def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0) 
         G = frame[None, y0:y0 + ws, x0:x0 + ws].astype(np.float32)
         geo = W.WindowGeometry.make(ws)
         for guess in (default, 4.0, 6.0):
-            a, b, r, code = refine_outline(G, geo, T.TrackingOptions(), guess)
+            a, b, r, code = (refine_outline(G, geo, T.TrackingOptions(), guess)
+                             if method == "outline" else
+                             refine_silhouette(G, geo, T.TrackingOptions(), guess))
             if code[0] == T.OK:
                 return float(r[0])
     return default
@@ -277,7 +370,7 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
     opts = options or T.TrackingOptions()
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
-    X, Y, R, reason = track_ball(frames, seeds[2], ball_method=ball_method,
+    X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
                                  radius_px=radius_px, window=window, options=opts)
     Xa = np.column_stack([tr.x, X])
     Ya = np.column_stack([tr.y, Y])
@@ -288,7 +381,7 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
     nan = np.nan
     return T.Tracks(x=np.where(lost, nan, Xa), y=np.where(lost, nan, Ya), lost=lost,
                     reason=reasons, radius=np.where(lost, nan, Ra),
-                    method=f"{method}+{ball_method}", window=window, dark=False, options=opts)
+                    method=f"{method}+{used}", window=window, dark=False, options=opts)
 
 
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,

@@ -25,6 +25,8 @@ from measurement.imaging import tracks_io
 from measurement.imaging.geometry import circle_centre, fixed_axis  # noqa: F401  (re-exported)
 from measurement.inference import infer_mu as inference_mod
 from measurement.inference import running_max as interval_mod
+from measurement.inference import onset as onset_mod
+from measurement.inference.slip_model import signed_mu_req
 from measurement.inference import uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
@@ -115,7 +117,21 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
                 noise=(sets[0].details.get("noise_model") or None) if sets else None,
                 options=each))
         inf = window_sets.intersect_sets(sets, windows, opt.inference.confidence)
-    return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf}
+    bracket = None if inf is None else _onset(time, kin, l, d, direction, inf, opt)
+    return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf,
+            "onset": bracket}
+
+
+def _onset(time: np.ndarray, kin: kin_mod.Kinematics, l: float, d: float, direction: int,
+           inf: inference_mod.Inference,
+           opt: AnalysisOptions) -> onset_mod.OnsetBracket:
+    """The slip-onset bracket from the model's set on mu (:mod:`onset`)."""
+    q_lo, q_hi = onset_mod.q_band(kin.omega, kin.omega_dot, kin.sigma_omega,
+                                  kin.sigma_omega_dot, kin.bias_omega_dot, l, d, direction,
+                                  float(opt.interval.k_sigma),
+                                  float(opt.inference.theta_harmonic_rad))
+    q = signed_mu_req(kin.omega, kin.omega_dot, l, d, direction)
+    return onset_mod.onset_bracket(time, q, q_lo, q_hi, kin.trusted, inf.mu_low, inf.mu_high)
 
 
 def _validate(time, x, y, lost, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

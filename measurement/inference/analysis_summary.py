@@ -10,6 +10,7 @@ import numpy as np
 from measurement.imaging import tracks_io
 from measurement.inference import uncertainty
 from measurement.inference.infer_mu import Inference
+from measurement.inference import running_max as interval_mod
 from measurement.inference.running_max import SlipInterval
 from measurement.kinematics import estimators as kin_mod
 
@@ -99,6 +100,7 @@ def _running_max_summary(iv: SlipInterval, opt: AnalysisOptions, time: np.ndarra
     """The report's running-max interval (``summary["running_max"]``)."""
     return {
         "mu_low": iv.mu_low, "mu_high": iv.mu_high, "status": iv.status,
+        "coverage_tested": False,
         "t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
         "relative_width": _rel_width(iv.mu_low, iv.mu_high),
         "mu_low_creep_model": iv.mu_creep,
@@ -134,7 +136,9 @@ def _reported_interval(inf: Inference | None, iv: SlipInterval, opt: AnalysisOpt
         min(inf.mu_low, iv.mu_low)
     mu_high = None if inf.mu_high is None or iv.mu_high is None else \
         max(inf.mu_high, iv.mu_high)
-    status = inf.status if inf.status != "ok" else iv.status
+    # the hull holds the model-based set: its coverage is at least that set's
+    status = inf.status if inf.status != "ok" else \
+        ("ok" if iv.status == interval_mod.BOUNDS_STATUS else iv.status)
     if status == "ok" and (mu_low is None or mu_high is None):
         status = "a bound is missing"
     return mu_low, mu_high, status
@@ -185,13 +189,21 @@ def record_summary(time: np.ndarray, x: np.ndarray, y: np.ndarray, lost: np.ndar
     kin, iv, inf = core["kin"], core["iv"], core["inf"]
     dt = kin_mod.sample_interval(time)
     mu_low, mu_high, status = _reported_interval(inf, iv, opt)
+    bracket = core.get("onset")
+    if bracket is not None and opt.combine != "hull":
+        t_slip_low, t_slip_high = bracket.t_low, bracket.t_high
+        onset = bracket.summary(opt.interval.k_sigma)
+    else:
+        t_slip_low, t_slip_high = iv.t_a, iv.t_b
+        onset = {"t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
+                 "method": "the report's running max (t_a, t_b): no coverage guarantee"}
     return {
         "mu_low": mu_low, "mu_high": mu_high, "status": status,
         **_model_results(inf),
         "relative_width": _rel_width(mu_low, mu_high),
         "running_max": _running_max_summary(iv, opt, time, dt),
         "model_fit": None if inf is None else _model_summary(inf),
-        "t_slip_low": iv.t_a, "t_slip_high": iv.t_b,
+        "t_slip_low": t_slip_low, "t_slip_high": t_slip_high, "onset_bracket": onset,
         "mu_low_creep_model": iv.mu_creep,
         "mu_low_no_error_bars": _value_at(iv.running_max, iv.t_a, time, dt),
         "mu_high_no_error_bars": _value_at(iv.running_max, iv.t_b, time, dt),

@@ -17,10 +17,15 @@ def describe_measurement(s: dict) -> str:
         lines.append(f"  ball-model fit of beta: [{fmt_value(mf['mu_low'])}, {fmt_value(mf['mu_high'])}] "
                      f"({mf['status']}), slip onset {fmt_value(mf['t_slip'], '.4f')} s; mu_d = "
                      f"{fmt_value(s.get('mu_d'))} in [{fmt_value(s.get('mu_d_low'))}, "
-                     f"{fmt_value(s.get('mu_d_high'))}]; report's running max: "
-                     f"[{fmt_value(rm['mu_low'])}, {fmt_value(rm['mu_high'])}]")
+                     f"{fmt_value(s.get('mu_d_high'))}]")
+        lines.append(f"  report's running max: [{fmt_value(rm['mu_low'])}, "
+                     f"{fmt_value(rm['mu_high'])}] ({rm['status']}"
+                     + ("" if "no coverage" in rm["status"] else "; no coverage guarantee")
+                     + ")")
     lines.append(f"  t_slip_low = {fmt_value(s['t_slip_low'], '.4f')} s (last surely stuck), "
-                 f"t_slip_high = {fmt_value(s['t_slip_high'], '.4f')} s (first surely slipping)")
+                 f"t_slip_high = {fmt_value(s['t_slip_high'], '.4f')} s (first surely slipping)"
+                 + (f", {100 * conf:g} % confidence" if conf is not None and mf else
+                    " (the running max's, no coverage guarantee)"))
     if s.get("relative_width") is not None:
         lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
     ea = s["error_analysis"]
