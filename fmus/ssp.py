@@ -348,6 +348,8 @@ def read_default_experiment(ssp: str | os.PathLike) -> Experiment:
 
     fmpy's ``simulate_ssp`` ignores ``DefaultExperiment``; pass these to it.
     """
+    from abu_model import validate
+
     path = Path(ssp)
     try:
         with zipfile.ZipFile(path) as zf:
@@ -355,8 +357,19 @@ def read_default_experiment(ssp: str | os.PathLike) -> Experiment:
         default = root.find("ssd:DefaultExperiment", NS)
         fixed = default.find("ssd:Annotations/ssc:Annotation/osp:Algorithm/"
                              "osp:FixedStepAlgorithm", NS)
-        return Experiment(float(default.get("startTime", "0")), float(default.get("stopTime")),
-                          float(fixed.get("baseStepSize")))
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, AttributeError,
-            TypeError, ValueError) as exc:
+        texts = (default.get("startTime", "0"), default.get("stopTime"),
+                 fixed.get("baseStepSize"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, AttributeError) as exc:
         raise SspError(f"{path}: no SSP default experiment with a fixed step ({exc})") from None
+    place = f"{path}, {SSD_NAME}, DefaultExperiment"
+
+    def attribute(text, name: str, **limits) -> float:
+        if text is None:
+            raise SspError(f"{place}: attribute '{name}' is missing; expected a number [s]")
+        return validate.cell(text, f"{place} attribute '{name}'", unit="s", error=SspError,
+                             **limits)
+
+    start = attribute(texts[0], "startTime")
+    stop = attribute(texts[1], "stopTime", lo=start, lo_open=True)
+    step = attribute(texts[2], "baseStepSize", lo=0.0, lo_open=True, hi=stop - start)
+    return Experiment(start, stop, step)

@@ -26,7 +26,7 @@ import pytest
 
 from abu_model.errors import ParameterError
 from fmus.ssp import NS, SSD_NAME, Experiment, read_default_experiment, read_fmu_interface, \
-    write_ssp
+    SspError, write_ssp
 from abu.cli.main import build_parser, main
 from abu.cli.options_cosim import staircase_from_args
 from harness.experiments.staircase import ensure_fmus, run_staircase
@@ -437,3 +437,32 @@ def test_c_host_runs_the_export_without_preload(tmp_path, exported, reference):
             print(f"\nC host (libcosimc, no LD_PRELOAD): slip at {got['t_slip']:.6f} s vs "
                   f"{ref['t_slip']:.6f} s, mu_low {got['mu_low']:.6g}, "
                   f"mu_high {got['mu_high']:.6g}")
+
+
+@pytest.mark.parametrize("attribute, value, expected", [
+    ("stopTime", "nan", "stopTime"), ("stopTime", "-1", "stopTime"),
+    ("stopTime", "1e400", "stopTime"), ("baseStepSize", "0", "baseStepSize"),
+    ("baseStepSize", "1e6", "baseStepSize"), ("baseStepSize", "0.001s", "baseStepSize"),
+    ("startTime", "inf", "startTime"), ("stopTime", None, "stopTime")])
+def test_a_default_experiment_that_makes_no_sense_is_refused_by_name(exported, tmp_path,
+                                                                     attribute, value,
+                                                                     expected):
+    """read_default_experiment checks what it reads: finite times [s], stop after start, a
+    step > 0 no longer than the run; the error names the archive and the attribute."""
+    import re
+    import zipfile
+
+    bad = tmp_path / "bad.ssp"
+    with zipfile.ZipFile(exported) as src, zipfile.ZipFile(bad, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == SSD_NAME:
+                text = data.decode()
+                pattern = rf'\s{attribute}="[^"]*"'
+                assert re.search(pattern, text), attribute
+                text = re.sub(pattern, "" if value is None else f' {attribute}="{value}"',
+                              text, count=1)
+                data = text.encode()
+            dst.writestr(item, data)
+    with pytest.raises(SspError, match=rf"bad\.ssp.*{expected}"):
+        read_default_experiment(bad)
