@@ -80,8 +80,9 @@ def coverage_rows(seeds) -> list[dict]:
                      "inside": inside, "miss": miss, "status": s["status"],
                      "width": s["relative_width"], "t_true": t_true,
                      "t_lo": s["t_slip_low"], "t_hi": s["t_slip_high"]})
-        # a null bound is never reported as "ok"
-        assert both == (s["status"] == "ok"), s["status"]
+        # a null bound is never reported as "ok"; both bounds are "ok" unless the model's set
+        # and the running max disagree ("check: ...", analysis_summary._disagreement)
+        assert both == (s["status"] == "ok" or s["status"].startswith("check: ")), s["status"]
     return rows
 
 
