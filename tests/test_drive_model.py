@@ -109,3 +109,24 @@ def test_measure_refuses_drive_model_without_a_drive(tmp_path, capsys):
     assert status == 2
     assert "--drive" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_measure_names_each_bad_staircase_option_and_refuses_them_without_the_model(tmp_path,
+                                                                                     capsys):
+    drive_json = tmp_path / "drive.json"
+    from controller.drive import Drive, dumps_drive
+    drive_json.write_text(dumps_drive(Drive("pi-lag", 0.5, 2.2, 0.0)))
+    base = ["measure", str(tmp_path / "none.csv"), "--tracks", "--out", str(tmp_path / "o"),
+            "--kinematics", "drive-model", "--drive", str(drive_json)]
+    stair = {"--omega0-hz": "-9", "--omega-end-hz": "-19", "--te": "0.5"}
+    for option, value in [("--step-hz", "0"), ("--step-hz", "nan"), ("--te", "0"),
+                          ("--t0", "inf"), ("--omega0-hz", "0"), ("--omega-end-hz", "5")]:
+        argv = base + [a for k, v in {**stair, option: value}.items() for a in (k, v)]
+        assert abu_main(argv) == 2, option
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and option in err[0], (option, err)
+    # the staircase options serve only the drive model: without it they are refused
+    assert abu_main(["measure", str(tmp_path / "none.csv"), "--tracks", "--out",
+                     str(tmp_path / "o"), "--omega0-hz", "-9"]) == 2
+    assert "--kinematics drive-model" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

@@ -68,6 +68,8 @@ RULES: tuple[Rule, ...] = (
      "with --no-harmonic (no lighting harmonic is fitted)"),
     ("measure", lambda a: a.mc_draws == 0, ("--seed",),
      "with --mc-draws 0 (the seed draws the Monte Carlo noise; give --mc-draws N)"),
+    ("measure", lambda a: a.kinematics != "drive-model", _STAIRCASE + ("--omega0-hz",),
+     "without --kinematics drive-model (the staircase serves only the drive model's fit)"),
     # identify
     ("identify", lambda a: a.pulses is None, ("--pulses-per-rev",),
      "without --pulses (it counts the pulses of --pulses)"),

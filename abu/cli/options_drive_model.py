@@ -11,7 +11,7 @@ import math
 
 from abu_model.errors import ParameterError
 
-HZ = 2.0 * math.pi
+from abu.cli.options_cosim import HZ
 
 
 def add_drive_model_options(p: argparse.ArgumentParser) -> None:
@@ -52,11 +52,14 @@ def drive_model_from_args(args: argparse.Namespace):
         if value is None or not math.isfinite(value):
             raise ParameterError(opt, value, "a finite number (the staircase the drive "
                                  "followed) with --kinematics drive-model")
-    if args.omega0_hz == 0 or not args.step_hz > 0 or not args.te > 0 \
-            or not math.isfinite(args.t0):
-        raise ParameterError("--omega0-hz/--step-hz/--te/--t0",
-                             (args.omega0_hz, args.step_hz, args.te, args.t0),
-                             "a non-zero speed, a step > 0 Hz, a duration > 0 s, a finite t0")
+    if args.omega0_hz == 0:
+        raise ParameterError("--omega0-hz", args.omega0_hz, "a non-zero speed [Hz]")
+    if not (math.isfinite(args.step_hz) and args.step_hz > 0):
+        raise ParameterError("--step-hz", args.step_hz, "a finite setpoint step > 0 Hz")
+    if not args.te > 0:
+        raise ParameterError("--te", args.te, "a duration > 0 s")
+    if not math.isfinite(args.t0):
+        raise ParameterError("--t0", args.t0, "a finite start time [s]")
     if args.omega_end_hz * args.omega0_hz <= 0:
         raise ParameterError("--omega-end-hz", args.omega_end_hz,
                              "a speed of the same sign as --omega0-hz (the drive turns one way)")
