@@ -273,6 +273,15 @@ def report(rows: list[dict], label: str) -> None:
         if r["status"] != "ok":
             nulls[r["status"]] = nulls.get(r["status"], 0) + 1
     print(f"  statuses other than ok: {nulls or 'none'}")
+    # the model's set disjoint from the running max (status "check: ..."), from the rows
+    # themselves, so that runs from before the status existed are counted the same way
+    disjoint = [r for r in ok if None not in (r["mu_low"], r["mu_high"], r.get("rm_low"),
+                                              r.get("rm_high"))
+                and (r["mu_high"] < r["rm_low"] or r["mu_low"] > r["rm_high"])]
+    misses = sum(not covered(r["mu_low"], r["mu_high"], r["mu"]) for r in disjoint)
+    print(f"  model's set disjoint from the running max ('check' status): {len(disjoint)} of "
+          f"{len(ok)}, {misses} of them missing mu (seeds "
+          f"{[r['seed'] for r in disjoint]})")
     d = [r for r in ok if r["mu_d_low"] is not None]
     if d:
         cov_d = np.mean([r["mu_d_low"] <= r["mu_d"] <= r["mu_d_high"] for r in d])
