@@ -90,27 +90,18 @@ def plot_experiment(table: Mapping[str, np.ndarray], summary: Mapping[str, Any],
     legend_outside(ax)
     written.append(save_fig(fig, out / f"{prefix}omega", figure_format))
 
-    fig, ax = new_figure()
-    ax.plot(t, table["alpha"], lw=1.3, label="omega_dot")
-    _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="omega_dot [rad/s^2]", title=f"ABU acceleration{title}")
-    legend_outside(ax)
-    written.append(save_fig(fig, out / f"{prefix}omega_dot", figure_format))
-
-    fig, ax = new_figure()
-    ax.plot(t, table["beta"], lw=1.3, label="beta")
-    _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="beta [rad]", title=f"Ball angle relative to the ABU{title}")
-    legend_outside(ax)
-    written.append(save_fig(fig, out / f"{prefix}beta", figure_format))
-
-    fig, ax = new_figure()
-    ax.plot(t, table["beta_dot"], lw=1.3, label="beta_dot")
-    _mark_slip(ax, summary)
-    ax.set(xlabel="time [s]", ylabel="beta_dot [rad/s]",
-           title=f"Ball speed relative to the ABU{title}")
-    legend_outside(ax)
-    written.append(save_fig(fig, out / f"{prefix}beta_dot", figure_format))
+    # the plain time series: column, its label, the y-axis label, the title, the file stem
+    for column, label, ylabel, heading, stem in (
+            ("alpha", "omega_dot", "omega_dot [rad/s^2]", "ABU acceleration", "omega_dot"),
+            ("beta", "beta", "beta [rad]", "Ball angle relative to the ABU", "beta"),
+            ("beta_dot", "beta_dot", "beta_dot [rad/s]", "Ball speed relative to the ABU",
+             "beta_dot")):
+        fig, ax = new_figure()
+        ax.plot(t, table[column], lw=1.3, label=label)
+        _mark_slip(ax, summary)
+        ax.set(xlabel="time [s]", ylabel=ylabel, title=f"{heading}{title}")
+        legend_outside(ax)
+        written.append(save_fig(fig, out / f"{prefix}{stem}", figure_format))
 
     fig, ax = new_figure()
     stuck = np.asarray(table["mode"]) == 0
