@@ -1,7 +1,7 @@
 """Error-controlled co-simulation against the monolithic SciPy reference (an independent
 solver of the same closed loop, no FMI), and the two ways the bounds used to overclaim.
 
-Family of the property test (printed with ``pytest -s``): mu in [1e-3, 6e-2]; |omega0| from
+Family of the property test (tests/staircase_family.py; printed with ``pytest -s``): mu in [1e-3, 6e-2]; |omega0| from
 0.7 to 1.6 (also 1 - 1e-2 to 1 - 1e-6) times the speed at which the first setpoint step
 makes the ball slip (so about a third of the cases slip at the first step); 1 to 40 steps
 of 1 Hz up or down in te from 0.02 to 1.5 s (setpoint steps down to a few 0.1 ms apart);
@@ -26,6 +26,7 @@ from abu_model.params import BallParams, PlantParams
 from abu_model.reference import simulate_staircase_reference
 from abu.cli.main import main
 from harness.experiments.staircase import StaircaseExperiment, run_staircase
+from staircase_family import family_experiment
 
 HZ = 2.0 * math.pi
 REPORT = dict(omega0=-17 * HZ, omega_end=-22 * HZ, t0=0.0, te=1.0)
@@ -79,30 +80,15 @@ def _rel(a: float, b: float) -> float:
 def test_default_tolerance_matches_reference_on_random_staircases(
         fmu_dir, mu, margin, n_steps, te, rounding, mode, sign, end_step, t0, tau_motor, w0_hz,
         t_end, k, up):
-    plant = PlantParams(BallParams(mu=mu), tau_motor=tau_motor)
-    direction = sign if up else -sign  # |omega| grows (up) or falls along the staircase
     if w0_hz is None:
-        probe = StaircaseExperiment(plant, sign * (1 + n_steps * HZ), sign, t0=t0, te=te,
-                                    rounding=rounding)
-        # margin to the slip speed of setpoint step k (a single step from steady rotation;
-        # k = 0 when |omega| grows). Where |omega| falls the ball slips at or before step k
-        # (fast steps pile their responses up), at a random excess of mu_req over mu and
-        # often only briefly: a slip that starts and ends inside one communication step.
-        k = 0 if up else min(k, len(probe.staircase.step_times) - 1)
-        tk = probe.staircase.step_times[k]
-        jump = 2 * 0.5 * 2.2 * HZ + (2.2**2 * tk * HZ if mode == "thesis" else 0.0)
-        w0 = sign * (margin * math.sqrt(plant.ball.lever_ratio * jump / mu)
-                     + (0.0 if up else (k + 1) * HZ))
-        w0 = sign * max(abs(w0), (0.0 if up else n_steps * HZ) + HZ)
-        steps = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
-                                    rounding=rounding).staircase.step_times
-        # end on a setpoint step after the first (the first would leave no stick period)
-        t_end = (None if end_step is None or len(steps) < 2
-                 else steps[1 + end_step % (len(steps) - 1)])
-    else:
-        w0 = w0_hz * HZ
-    exp = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
-                              rounding=rounding, theta_ref_mode=mode, t_end=t_end)
+        exp = family_experiment(mu=mu, margin=margin, n_steps=n_steps, te=te, rounding=rounding,
+                                mode=mode, sign=sign, end_step=end_step, t0=t0,
+                                tau_motor=tau_motor, k=k, up=up)
+    else:  # an explicit example: the staircase as given
+        plant = PlantParams(BallParams(mu=mu), tau_motor=tau_motor)
+        w0, direction = w0_hz * HZ, (sign if up else -sign)
+        exp = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
+                                  rounding=rounding, theta_ref_mode=mode, t_end=t_end)
     res = run_staircase(exp, fmu_dir)
     s = res.summary
     ref = _reference(exp)

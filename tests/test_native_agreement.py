@@ -1,5 +1,5 @@
 """The native FMUs give the Python FMUs' results through our master (harness), on the random
-staircases of tests/test_cosim_accuracy.py.
+staircases of tests/test_cosim_accuracy.py (the family of tests/staircase_family.py).
 
 The experiments take the FMU files as a mapping {name: path} (``harness.experiments.fmu_files.
 ensure_fmus``), so the native build drops in with no hook. Family (seeded, 200 cases): mu in
@@ -13,44 +13,14 @@ differences; measured: identical to the last bit).
 """
 from __future__ import annotations
 
-import math
 import random
 
 import pytest
 
-from abu_model.params import BallParams, PlantParams
-from harness.experiments.staircase import StaircaseExperiment, run_staircase
+from harness.experiments.staircase import run_staircase
+from staircase_family import draw_experiment
 
-HZ = 2.0 * math.pi
 CASES = 200
-
-
-def family_case(rng: random.Random) -> StaircaseExperiment:
-    """One staircase of the family of tests/test_cosim_accuracy.py (same ranges and rules)."""
-    mu = rng.uniform(1e-3, 6e-2)
-    margin = rng.uniform(0.7, 1.6) if rng.random() < 0.7 else 1 - 10 ** -rng.uniform(2.0, 6.0)
-    n_steps, te = rng.randint(1, 40), rng.uniform(0.02, 1.5)
-    rounding = rng.choice(["lead", "nearest", "trail"])
-    mode = rng.choice(["integral", "thesis"])
-    sign, up = rng.choice([-1.0, 1.0]), rng.random() < 0.5
-    end_step, t0 = rng.choice([None, 0, 1, 2, 3]), rng.uniform(0.0, 0.5)
-    tau_motor, k = rng.choice([0.0, 0.002, 0.01]), rng.randint(0, 39)
-    plant = PlantParams(BallParams(mu=mu), tau_motor=tau_motor)
-    direction = sign if up else -sign
-    probe = StaircaseExperiment(plant, sign * (1 + n_steps * HZ), sign, t0=t0, te=te,
-                                rounding=rounding)
-    k = 0 if up else min(k, len(probe.staircase.step_times) - 1)
-    tk = probe.staircase.step_times[k]
-    jump = 2 * 0.5 * 2.2 * HZ + (2.2**2 * tk * HZ if mode == "thesis" else 0.0)
-    w0 = sign * (margin * math.sqrt(plant.ball.lever_ratio * jump / mu)
-                 + (0.0 if up else (k + 1) * HZ))
-    w0 = sign * max(abs(w0), (0.0 if up else n_steps * HZ) + HZ)
-    steps = StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
-                                rounding=rounding).staircase.step_times
-    t_end = (None if end_step is None or len(steps) < 2
-             else steps[1 + end_step % (len(steps) - 1)])
-    return StaircaseExperiment(plant, w0, w0 + direction * n_steps * HZ, t0=t0, te=te,
-                               rounding=rounding, theta_ref_mode=mode, t_end=t_end)
 
 
 def _rel(a, b) -> float:
@@ -64,7 +34,7 @@ def test_native_and_python_fmus_agree_on_random_staircases(native_fmu_dir, fmu_d
     rng = random.Random(21)
     worst = {"switch_s": 0.0, "bound_rel": 0.0, "switches": 0, "slips": 0}
     for case in range(CASES):
-        exp = family_case(rng)
+        exp = draw_experiment(rng)
         py = run_staircase(exp, fmu_dir).summary
         nat = run_staircase(exp, native_fmu_dir).summary
         where = f"case {case}: {exp.as_dict()}"
