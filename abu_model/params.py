@@ -18,6 +18,10 @@ from .errors import ParameterError
 #: scale with it); only the ball's reaction does, as m l^2 / J_abu ~ 4e-4.
 DEFAULT_J_ABU = 4.5e-5
 
+#: Fastest frame rate taken as a camera's [frames/s]: burst cameras reach 1e7 frames/s
+#: (e.g. Shimadzu HPV-X2); every reader, option and plan checks against this one figure.
+MAX_CAMERA_FPS_HZ = 1.0e7
+
 
 def check_finite(name: str, value: Any, expected: str = "a finite number") -> float:
     """Return ``value`` as float, or raise :class:`ParameterError` if it is not finite."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import warnings
 
@@ -205,3 +206,34 @@ def test_api_follows_the_same_rule(tmp_path):
         warnings.simplefilter("always")
         assert api.track(cine, fps_hz=1200).info["fps_hz"] == 1200
     assert [str(w.message) for w in caught if "fps_hz 1200" in str(w.message)]
+
+
+def test_one_frame_rate_limit_for_options_library_files_and_plans(tmp_path, capsys):
+    """The command line, the library, the camera-file readers and `abu design` refuse a rate
+    above the same figure (abu_model.params.MAX_CAMERA_FPS_HZ; the library used to take 1e8
+    and design 1e6) and accept one at it."""
+    from abu import api
+    from abu_model.errors import ParameterError
+    from abu_model.params import MAX_CAMERA_FPS_HZ
+    from measurement.imaging.camera_file_common import CameraFileError
+
+    too_fast = 2 * MAX_CAMERA_FPS_HZ
+    frames = _small_stack(25)
+    npy = write_npy(tmp_path / "r.npy", frames)
+    assert main(["track", str(npy), "--out", str(tmp_path / "o"), "--fps", f"{too_fast:g}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--fps" in err and f"{MAX_CAMERA_FPS_HZ:g}" in err
+    with pytest.raises(ParameterError, match=re.escape(f"{MAX_CAMERA_FPS_HZ:g}")):
+        api.track(npy, fps_hz=too_fast)
+    assert main(["design", "--mu-range", "0.02", "0.04", "--fps", f"{too_fast:g}"]) == 2
+    assert "--fps" in capsys.readouterr().err
+    hpath, _ = write_mraw(tmp_path / "cam", frames, 2000, 8)
+    text = hpath.read_text().replace("Record Rate(fps) : 2000",
+                                     f"Record Rate(fps) : {too_fast:.0f}")
+    assert str(int(too_fast)) in text
+    hpath.write_text(text)
+    with pytest.raises(CameraFileError, match="Record Rate"):
+        read_camera_file(hpath)
+    # at the limit: accepted by the library
+    tracks = api.track(npy, fps_hz=MAX_CAMERA_FPS_HZ)
+    assert tracks is not None

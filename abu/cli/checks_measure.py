@@ -8,12 +8,13 @@ from __future__ import annotations
 import argparse
 
 from abu_model.errors import ParameterError
+from abu_model.params import MAX_CAMERA_FPS_HZ
 from abu.cli.common import count_limit, in_range, integer_range, positive
 
 #: Option limits (why: in the messages).
 MAX_MC_DRAWS = 100_000
 MAX_POLY_DEGREE = 30
-MAX_FPS = 1.0e7
+MAX_FPS = MAX_CAMERA_FPS_HZ
 MAX_RECORD_S = 100.0
 #: Ranges of the render options (option, low, high, unit, why); checked when present.
 RENDER_RANGES = (

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np  # noqa: F401
 
+from abu_model.params import MAX_CAMERA_FPS_HZ
+
 
 from measurement.imaging.recording_checks import MAX_FRAMES, MAX_PIXELS, RecordingError
 
@@ -18,7 +20,7 @@ from measurement.imaging.recording_checks import MAX_FRAMES, MAX_PIXELS, Recordi
 MAX_HEADER_BYTES = 4 * 2**20
 #: Largest image side [px] and frame rate [fps] taken as plausible.
 MAX_SIDE_PX = 65535
-MAX_FPS = 1e8
+MAX_FPS = MAX_CAMERA_FPS_HZ
 #: Frames unpacked per block (12-bit MRAW) and written per block.
 BLOCK_FRAMES = 64
 

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from abu_model.errors import ParameterError
+from abu_model.params import MAX_CAMERA_FPS_HZ
 
 from measurement.imaging.recording_checks import RecordingError
 
@@ -38,8 +39,8 @@ TIFF_KIND = "abu-frames"
 RENDER_META_KIND = "abu-render-meta"
 #: Relative difference of a given and a stated rate reported as a disagreement.
 RATE_TOLERANCE = 1e-6
-#: Plausible frame rates [frames/s] (as the camera-file readers check).
-MAX_FPS_HZ = 1e8
+#: Plausible frame rates [frames/s] (the one limit of readers, options and plans).
+MAX_FPS_HZ = MAX_CAMERA_FPS_HZ
 
 
 class MissingFrameRateError(RecordingError):
