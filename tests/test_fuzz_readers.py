@@ -198,3 +198,78 @@ def test_measure_summary_command_on_mutated_files(tmp_path_factory, text, capsys
         data = json.loads(text)
         result = json.loads(captured.out)
         assert result["union_hull"][0] == pytest.approx(data["mu_low"] or 0.0)
+
+
+# ------------------------------------------------------------------- identify --pulses
+def _pulses_text() -> str:
+    """Pulse times [s] of a 4-pulse/rev sensor on a speed step 5 -> 20 Hz at 0.1 s behind the
+    twin's loop (zeta 0.7, omega_n 12 rad/s, 20 ms lag), timer quantum 20 us."""
+    from harness.planning.loop_response import Setpoints, response
+
+    sp = Setpoints((0.1,), (5 * 2 * np.pi, 20 * 2 * np.pi))
+    t = np.linspace(0.0, 1.3, 20001)
+    angle = response(sp, t, 0.7, 12.0, 0.02).theta
+    angle = angle - angle[0]
+    k = np.arange(1, int(angle[-1] / (np.pi / 2)))
+    tp = np.round(np.interp(k * np.pi / 2, angle, t) / 20e-6) * 20e-6
+    return "time_s\n" + "".join(f"{float(v)!r}\n" for v in tp)
+
+
+PULSES = _pulses_text()
+SETPOINTS = f"time_s,omega_ref_rad_s\n0.0,{5 * 2 * np.pi!r}\n0.1,{20 * 2 * np.pi!r}\n"
+
+
+def test_the_undamaged_pulse_file_identifies_its_loop(tmp_path, capsys):
+    """The fuzz tests below start from a file that works (else they would test refusals only)."""
+    from abu.cli.main import main
+
+    (tmp_path / "pulses.csv").write_text(PULSES, encoding="utf-8")
+    (tmp_path / "setpoints.csv").write_text(SETPOINTS, encoding="utf-8")
+    assert main(["identify", "--pulses", str(tmp_path / "pulses.csv"), "--pulses-per-rev", "4",
+                 "--setpoints", str(tmp_path / "setpoints.csv"), "--out", str(tmp_path / "o"),
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["omega_n_rad_s"] == pytest.approx(12.0, rel=0.05)
+
+
+@settings(max_examples=300, **SETTINGS)
+@given(text=mutated_text(PULSES))
+def test_pulses_reader_on_mutated_files(tmp_path, text):
+    from harness.planning.record_io import read_pulses
+
+    path = tmp_path / "pulses.csv"
+    path.write_text(text, encoding="utf-8")
+    try:
+        record = read_pulses(path, 4)
+    except AbuError:
+        return
+    assert np.isfinite(record.t).all() and (np.diff(record.t) > 0).all()
+    assert record.y.tolist() == list(range(record.t.size)) and record.pulses_per_rev == 4
+
+
+@settings(max_examples=30, **SETTINGS)
+@given(text=mutated_text(PULSES))
+def test_identify_pulses_command_on_mutated_files(tmp_path_factory, text, capsys):
+    """``abu identify --pulses`` on a damaged pulse file: exit 0 with a drive whose parameters
+    are finite and positive, or exit 2 with one line and nothing written; never a traceback."""
+    from abu.cli.main import main
+    from controller.drive import load_drive
+
+    d = tmp_path_factory.mktemp("fuzz_pulses")
+    (d / "pulses.csv").write_text(text, encoding="utf-8")
+    (d / "setpoints.csv").write_text(SETPOINTS, encoding="utf-8")
+    out = d / "out"
+    try:
+        code = main(["identify", "--pulses", str(d / "pulses.csv"), "--pulses-per-rev", "4",
+                     "--setpoints", str(d / "setpoints.csv"), "--out", str(out), "--json"])
+    except SystemExit as exc:
+        code = exc.code
+    captured = capsys.readouterr()
+    assert code in (0, 2), captured.err
+    assert "Traceback" not in captured.err
+    if code == 2:
+        assert len(captured.err.strip().splitlines()) == 1 and not out.exists()
+    else:
+        drive = load_drive(out / "drive.json")
+        for value in (drive.zeta, drive.omega_n, drive.tau_motor):
+            assert np.isfinite(value) and value >= 0.0
+        assert drive.zeta > 0 and drive.omega_n > 0
