@@ -1,7 +1,8 @@
 """Property-based fuzzing of the readers with mutated files (issue 11).
 
-Recordings (multi-page TIFF of our writer, OpenCV's multi-page TIFF, .npy), tracks CSV and
-summary JSON files are truncated, bit-flipped, spliced. Properties:
+Recordings (multi-page TIFF of our writer, OpenCV's multi-page TIFF, .npy), tracks CSV,
+summary JSON and ``abu identify --pulses`` pulse-time files are truncated, bit-flipped,
+spliced. Properties:
 
 * the reader raises nothing but the toolkit's error type (:class:`abu_model.errors.AbuError`);
 * a truncated recording is refused (never measured on the frames that survive), unless only
@@ -9,7 +10,9 @@ summary JSON files are truncated, bit-flipped, spliced. Properties:
 * a recording read despite flipped bytes has the original frame count and frame size;
 * a tracks table read from a damaged CSV is still a valid table (finite, time increasing);
 * ``abu measure-summary`` on a damaged summary exits 0 or 2, never 1 (an internal error), and
-  when it exits 0 the interval it used is one the damaged file really states.
+  when it exits 0 the interval it used is one the damaged file really states;
+* a pulse file read despite the damage has finite, strictly increasing times, and
+  ``abu identify --pulses`` on it exits 0 with a finite drive or 2 with one line.
 """
 from __future__ import annotations
 
