@@ -291,3 +291,5 @@ def test_a_named_command_builds_only_its_own_parser_and_the_same_one():
         assert _options(build_parser(command), command) == _options(full, command), command
     assert _command_of(["--debug", "measure", "x", "--out", "y"]) == "measure"
     assert _command_of(["--version"]) is None
+    assert _command_of(["-h", "measure"]) is None          # the top-level help: every command
+    assert _command_of(["measure", "-h"]) == "measure"

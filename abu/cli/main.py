@@ -75,9 +75,14 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _command_of(argv: Sequence[str] | None) -> str | None:
     """The command a command line names: its first word that is not an option (the global
-    options, ``--version`` and ``--debug``, take no value)."""
-    words = sys.argv[1:] if argv is None else argv
-    return next((w for w in words if not w.startswith("-")), None)
+    options, ``--version`` and ``--debug``, take no value); None after a global ``-h`` (the
+    top-level help lists every command)."""
+    for word in sys.argv[1:] if argv is None else argv:
+        if word in ("-h", "--help"):
+            return None
+        if not word.startswith("-"):
+            return word
+    return None
 
 
 def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
