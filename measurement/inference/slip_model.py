@@ -67,7 +67,7 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
         t_on, ep, c0, j = _episode(t, q, omega, mu[rows, 0], mud[rows, 0], g[rows, i_s],
                                    e[sub], cs[sub], i_s, start, h)
         onset_first[rows] = np.where(np.isinf(onset_first[rows]), t_on, onset_first[rows])
-        disp[rows, c0:] = disp[rows, c0:] + ep
+        disp[sub, c0:] = disp[sub, c0:] + ep
         # after the re-stick the next episode starts at j (a row that never re-sticks ends)
         keep = j < n
         rows, start = rows[keep], j[keep]
@@ -100,17 +100,19 @@ def _episode(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
     idx = np.arange(c0, n)[None, :]
     # u_n = [E_is u_is + CS_n - CS_is] / E_n for n >= i_s
     base = e[rows, i_s] * u_is - cs[rows, i_s]
-    u = (base[:, None] + cs[:, c0:]) / e[:, c0:]
+    u = cs[:, c0:] + base[:, None]
+    u /= e[:, c0:]
     live = idx >= i_s[:, None]
     stop = live & (u < 0.0)
     stop_any = stop.any(axis=1)
     j = np.where(stop_any, np.argmax(stop, axis=1) + c0, n)  # first re-stick sample
-    u = np.where(live & (idx < j[:, None]), u, 0.0)
+    u[~(live & (idx < j[:, None]))] = 0.0
     # displacement: trapezoid of u from t[i_s] on, plus the partial first interval
-    cd = np.zeros(u.shape)
-    np.cumsum(_trapezoids(u, h), axis=1, out=cd[:, 1:])
-    cd = cd - cd[rows, i_s - c0][:, None]
-    ep = np.where(live, d_is[:, None] + cd, 0.0)
+    ep = np.zeros(u.shape)
+    np.cumsum(_trapezoids(u, h), axis=1, out=ep[:, 1:])
+    ep -= ep[rows, i_s - c0][:, None]
+    ep += d_is[:, None]
+    ep[~live] = 0.0
     return t_on, ep, c0, j
 
 
