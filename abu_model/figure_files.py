@@ -51,7 +51,9 @@ def save_figure(fig, path: str | os.PathLike, figure_format: str = "png") -> Pat
     import matplotlib  # loaded already: ``fig`` is a matplotlib figure
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    if fmt == "png" and isinstance(fig.canvas, FigureCanvasAgg):
+    # the plain Agg canvas (the commands' own, and pyplot's without a display); a GUI
+    # canvas is left to savefig, which draws off screen
+    if fmt == "png" and type(fig.canvas) is FigureCanvasAgg:
         atomic_write_bytes(target, _png_bytes(fig))
         return target
     buffer = io.BytesIO()
