@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import io
 import os
+import struct
+import zlib
 from pathlib import Path
 
 from abu_model.atomic_io import atomic_write_bytes
@@ -46,16 +48,60 @@ def save_figure(fig, path: str | os.PathLike, figure_format: str = "png") -> Pat
     atomically; returns the path written."""
     fmt = check_figure_format(figure_format)
     target = figure_path(path, fmt)
-    buffer = io.BytesIO()
     import matplotlib  # loaded already: ``fig`` is a matplotlib figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    # fixed SVG ids (else random clip-path names); PNG: fast zlib (the pixels, not the bytes,
-    # are what a reader sees)
+    # the plain Agg canvas (the commands' own, and pyplot's without a display); a GUI
+    # canvas is left to savefig, which draws off screen
+    if fmt == "png" and type(fig.canvas) is FigureCanvasAgg:
+        atomic_write_bytes(target, _png_bytes(fig))
+        return target
+    buffer = io.BytesIO()
+    # fixed SVG ids (else random clip-path names)
     with matplotlib.rc_context({"svg.hashsalt": "abu-friction"}):
         fig.savefig(buffer, format=fmt, dpi=PNG_DPI, metadata=_METADATA[fmt],
                     **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}))
     atomic_write_bytes(target, buffer.getvalue())
     return target
+
+
+def _png_bytes(fig) -> bytes:
+    """``fig`` drawn by Agg at :data:`PNG_DPI` as a PNG: RGB when every pixel is opaque (the
+    figures' white background), unfiltered rows, zlib level 1.
+
+    The pixels are those ``fig.savefig(..., dpi=PNG_DPI)`` writes; only the encoding differs:
+    Pillow's adaptive row filters cost 2/3 of its ~33 ms a figure and, on line art, give a
+    larger file than no filter (measured on the measurement's two figures: 33 -> 10 ms,
+    280 -> 240 kB)."""
+    import matplotlib
+    import numpy as np
+
+    dpi0 = fig.dpi
+    fig.set_dpi(PNG_DPI)
+    try:
+        fig.canvas.draw()
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+    finally:
+        fig.set_dpi(dpi0)
+    opaque = bool((rgba[..., 3] == 255).all())
+    pixels = rgba[..., :3] if opaque else rgba
+    height, width, channels = pixels.shape
+    rows = np.zeros((height, 1 + width * channels), np.uint8)   # filter byte 0: none
+    rows[:, 1:] = pixels.reshape(height, -1)
+    ppm = round(PNG_DPI / 0.0254)                                 # pixels per metre
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    software = f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
+    return b"".join((
+        b"\x89PNG\r\n\x1a\n",
+        chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2 if opaque else 6, 0, 0, 0)),
+        chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1)),
+        chunk(b"tEXt", b"Software\0" + software.encode("latin-1")),
+        chunk(b"IDAT", zlib.compress(rows, 1)),
+        chunk(b"IEND", b"")))
 
 
 def _texts(fig) -> list:

@@ -10,14 +10,18 @@ with ``--no-plots`` (the peer: the price of the figures). For every run it print
 time and the child's CPU time (user + sys, ``getrusage(RUSAGE_CHILDREN)``; on a machine other
 people load, the CPU time is the figure to compare), their medians and the ratio to the
 recording's duration (the targets of issue 20: <= 1.0x without figures, <= 1.5x with them, on
-an idle core).
+an idle core). The children cache their compiled modules (``PYTHONPYCACHEPREFIX`` in the
+temporary folder), as an installed package does; when the environment sets
+PYTHONDONTWRITEBYTECODE, three more ``--no-plots`` runs show the price of compiling every
+module at each start.
 
 Then one in-process run, timed stage by stage with ``time.process_time`` (no profiler
-overhead): imports, reading, finding the markers, tracking, analysis (kinematics, harmonics,
-running maximum, model inference over the Savitzky-Golay windows), writing the CSV/JSON and
-drawing the figures.
+overhead): imports, reading, finding the markers, tracking, analysis (and its parts: the
+lighting harmonics, the running maximum, the model inference with its slip model, noise
+model factor and whitening), writing the CSV/JSON, importing matplotlib and drawing the
+figures (Agg drawing and PNG encoding apart).
 
-    nice python benchmarks/bench_measure.py [--seed 1] [--repeat 5]
+    python benchmarks/bench_measure.py [--seed 1] [--repeat 5]     (on an idle machine)
 """
 from __future__ import annotations
 
@@ -47,22 +51,56 @@ from measurement.imaging.reflections import track_markers
 from measurement.inference.analysis import analyse_tracks
 t_imp = T() - t0
 rec_path, refl = sys.argv[1], int(sys.argv[2])
-out = {"imports (measurement, numpy, tifffile, cv2)": t_imp}
-t = T(); rec = read_recording(rec_path); out["read recording"] = T() - t
+out = {"imports (measurement, numpy)": t_imp}
+t = T(); from abu.cli.main import build_parser; build_parser("measure")
+out["imports: abu command line + 'measure' parser"] = T() - t
+t = T(); rec = read_recording(rec_path); out["read recording (incl. tifffile import)"] = T() - t
 t = T(); seeds, _ = find_markers(np.asarray(rec.frames[0]), ball_reflections=refl)
-out["find markers (frame 0)"] = T() - t
+out["find markers (frame 0, incl. cv2 import)"] = T() - t
 t = T(); tracks = track_markers(rec.frames, seeds, ball_reflections=refl)
 out["tracking"] = T() - t
 t = T(); mt = pipeline.track_recording(rec_path, settings=pipeline.TrackingSettings(
     ball_reflections=refl))
 pipe_track = T() - t
+
+# the analysis' parts: CPU time inside a few functions, by wrappers (no profiler)
+from measurement.inference import noise_models, profile_cache, infer_mu, running_max
+from measurement.inference import analysis as an
+from measurement.kinematics import harmonic
+inner = {}
+def timed(owner, name, label):
+    f = getattr(owner, name)
+    def wrap(*a, **k):
+        t = T()
+        try:
+            return f(*a, **k)
+        finally:
+            inner[label] = inner.get(label, 0.0) + T() - t
+    setattr(owner, name, wrap)
+timed(profile_cache, "slip_displacement", "slip model (episodes)")
+timed(noise_models.Gls, "whiten", "whitening (x inverse factor)")
+timed(noise_models, "leftover_whitener_of", "noise model: inverse factor")
+timed(an.inference_mod, "infer_mu", "model inference (infer_mu)")
+timed(an.interval_mod, "slip_interval", "running max + creep bound")
+timed(an.harmonic_mod, "remove_harmonic", "lighting harmonics")
 t = T(); res = pipeline.measure_tracks(mt); out["analysis + uncertainty"] = T() - t
+nested = {"slip model (episodes)", "whitening (x inverse factor)",
+          "noise model: inverse factor"}
+for k, v in inner.items():
+    out[("    of which " if k in nested else "  of which ") + k] = v
 d = tempfile.mkdtemp()
 t = T(); pipeline.write_measurement(res, d, plots=False); out["write CSV + JSON"] = T() - t
 t = T(); import matplotlib.figure, matplotlib.backends.backend_agg
 out["figures: import matplotlib"] = T() - t
-t = T(); from measurement.report.plots import plot_analysis; plot_analysis(res.table, res.summary, d)
-out["figures: draw + PNG"] = T() - t
+from measurement.report import plots
+import abu_model.figure_files as ff
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+timed(FigureCanvasAgg, "draw", "draw (Agg)")
+timed(ff, "_png_bytes", "png")
+t = T(); plots.plot_analysis(res.table, res.summary, d)
+out["figures: build + draw + PNG"] = T() - t
+out["  of which draw (Agg)"] = inner.get("draw (Agg)", 0.0)
+out["  of which encode PNG"] = inner.get("png", 0.0) - inner.get("draw (Agg)", 0.0)
 for k, v in out.items():
     print(f"{k}\t{v}")
 print(f"(read + markers + tracking + gap filling through the pipeline: {pipe_track:.3f} s)",
@@ -78,13 +116,26 @@ def abu_cmd() -> list[str]:
     return base
 
 
-def timed(cmd: list[str]) -> tuple[float, float]:
+def child_env(pycache: Path | None) -> dict:
+    """The children's environment: one BLAS thread, this checkout first on the path, and the
+    compiled modules cached in ``pycache`` as an installed package has them (pip compiles on
+    install; a checkout run with PYTHONDONTWRITEBYTECODE=1 compiles every module of the
+    project at each start, ~0.06 s more). ``pycache`` None: no bytecode written or read
+    from a cache folder (the environment's own setting)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "PYTHONPATH": str(ROOT)}
+    if pycache is not None:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(pycache)
+    return env
+
+
+def timed(cmd: list[str], env: dict) -> tuple[float, float]:
     """(wall, CPU user + sys) seconds of one run of ``cmd`` as a child process."""
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                   env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-                        "PYTHONPATH": str(ROOT)})
+                   env=env)
     wall = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
@@ -115,11 +166,15 @@ def main() -> None:
         refl = ["--ball-reflections", "2"] if scn.lighting.reflections == 2 else []
         base = abu_cmd() + ["measure", str(rec), "--out", str(tmp / "out"), "--overwrite",
                             "--quiet"] + refl
-        timed(base + ["--no-plots"])             # warm the page cache and the .pyc files
+        env = child_env(tmp / "pycache")
+        timed(base, env)                          # warm the page cache and the .pyc files
         whole, noplot = [], []
         for _ in range(args.repeat):              # alternate the two, several pairs
-            whole.append(timed(base))
-            noplot.append(timed(base + ["--no-plots"]))
+            whole.append(timed(base, env))
+            noplot.append(timed(base + ["--no-plots"], env))
+        plain = child_env(None)
+        nocache = [timed(base + ["--no-plots"], plain) for _ in range(3)] \
+            if plain.get("PYTHONDONTWRITEBYTECODE") else []
         print(f"abu measure on {scn.n_frames} frames ({scn.width}x{scn.height} px, "
               f"{scn.fps:g} frames/s = {duration:.3f} s recorded; seed {args.seed}, "
               f"{scn.lighting.reflections} reflection(s)), whole process, one core, "
@@ -128,13 +183,15 @@ def main() -> None:
         print(_line("--no-plots (peer):", noplot, duration))
         print(f"  figures cost {statistics.median(r[1] for r in whole) - statistics.median(r[1] for r in noplot):.3f} s CPU "
               f"(median difference)")
-        start = timed([sys.executable, "-c", "import abu.cli.main"])
+        if nocache:
+            print(_line("--no-plots, no .pyc:", nocache, duration))
+            print("  (PYTHONDONTWRITEBYTECODE is set here: every module of the project "
+                  "compiled at each start, unlike an installed package)")
+        start = timed([sys.executable, "-c", "import abu.cli.main"], env)
         print(f"  'import abu.cli.main' alone (fresh process): wall {start[0]:.3f} s, "
               f"CPU {start[1]:.3f} s")
 
         # where the time goes: one in-process run, stage by stage (CPU time, no profiler)
-        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-               "PYTHONPATH": str(ROOT)}
         cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + [
             sys.executable, "-c", STAGES, str(rec), str(scn.lighting.reflections)]
         proc = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
@@ -142,7 +199,7 @@ def main() -> None:
         total = 0.0
         for row in proc.stdout.strip().splitlines():
             name, value = row.split("\t")
-            total += float(value)
+            total += 0.0 if name.startswith(" ") else float(value)   # parts: not summed
             print(f"    {name:<44s} {float(value):6.3f} s = {float(value) / duration:5.2f} x "
                   "recording")
         print(f"    {'sum':<44s} {total:6.3f} s (interpreter start-up not included)")

@@ -164,3 +164,32 @@ def test_pdf_and_svg_on_request(tmp_path, tracks_csv, fmu_dir):
                  str(tmp_path / "s2"), "--figure-format", "svg"]) == 0
     assert (tmp_path / "s2" / "histogram.svg").read_bytes() == \
         (tmp_path / "s" / "histogram.svg").read_bytes()
+
+
+@pytest.mark.parametrize("facecolor", ["white", (1.0, 1.0, 1.0, 0.0)])
+def test_png_holds_the_pixels_savefig_draws(tmp_path, facecolor):
+    """The PNG writer of :func:`abu_model.figure_files.save_figure` (unfiltered rows, zlib
+    level 1) stores the very pixels matplotlib's own PNG (Pillow) does, at PNG_DPI, RGB for an
+    opaque figure and RGBA for a transparent one; Pillow reads it back with its dpi."""
+    import io
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from PIL import Image
+
+    fig = Figure(figsize=(3.1, 2.2), facecolor=facecolor)
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    ax.plot(np.linspace(0, 1, 50), np.sin(np.linspace(0, 9, 50)), label="a curve")
+    ax.legend()
+    ax.set_xlabel("time [s]")
+    reference = io.BytesIO()
+    fig.savefig(reference, format="png", dpi=ff.PNG_DPI)
+    path = ff.save_figure(fig, tmp_path / "f", "png")
+    assert path.name == "f.png" and fig.dpi == 100     # the figure's own dpi is restored
+    with Image.open(path) as mine, Image.open(reference) as ref:
+        mine.load()
+        assert mine.mode == ("RGB" if facecolor == "white" else "RGBA")
+        assert mine.size == ref.size == (round(3.1 * ff.PNG_DPI), round(2.2 * ff.PNG_DPI))
+        assert min(mine.info["dpi"]) >= ff.PNG_DPI - 0.5
+        assert np.array_equal(np.asarray(mine.convert("RGBA")), np.asarray(ref.convert("RGBA")))

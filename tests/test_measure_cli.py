@@ -256,10 +256,11 @@ def test_unreadable_frame_in_a_folder_exits_2(tmp_path, capsys):
 def test_measure_imports_no_heavy_library(tracks_csv, tmp_path):
     """The 2 s budget of `abu measure` (issue 7): SciPy (scipy.optimize alone cost 0.33 s
     through the lower bound's root finder), fmpy, Dask and python-control are never imported,
-    matplotlib only when plotting."""
+    matplotlib only when plotting; nor the twin and the harness, which only other commands'
+    parsers need (issue 20)."""
     import subprocess
     import sys
-    heavy = ("scipy", "matplotlib", "fmpy", "dask", "control", "pandas")
+    heavy = ("scipy", "matplotlib", "fmpy", "dask", "control", "pandas", "twin", "harness")
     code = ("import json, sys; from abu.cli.main import main; "
             f"rc = main(['measure', {str(tracks_csv)!r}, '--tracks', '--out', "
             f"{str(tmp_path / 'o')!r}, '--quiet', '--no-plots']); "
@@ -267,3 +268,28 @@ def test_measure_imports_no_heavy_library(tracks_csv, tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip().splitlines()[-1]
     assert json.loads(out) == [0]
+
+
+def _options(parser, command: str) -> dict:
+    """Option string -> (dest, default, nargs, choices) of ``command``'s subparser."""
+    import argparse
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {s: (a.dest, repr(a.default), a.nargs, a.choices)
+            for a in sub.choices[command]._actions for s in a.option_strings or [a.dest]}
+
+
+def test_a_named_command_builds_only_its_own_parser_and_the_same_one():
+    """`abu CMD` registers only the module of CMD (the others import the twin and the harness:
+    ~40 ms of `abu measure`'s budget): the map covers every command of the full parser, and
+    each command's options, defaults and choices are those of the full parser."""
+    import argparse
+    from abu.cli.main import COMMAND_MODULE, _command_of, build_parser
+    full = build_parser()
+    sub = next(a for a in full._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) == set(COMMAND_MODULE)
+    for command in COMMAND_MODULE:
+        assert _options(build_parser(command), command) == _options(full, command), command
+    assert _command_of(["--debug", "measure", "x", "--out", "y"]) == "measure"
+    assert _command_of(["--version"]) is None
+    assert _command_of(["-h", "measure"]) is None          # the top-level help: every command
+    assert _command_of(["measure", "-h"]) == "measure"

@@ -43,9 +43,22 @@ class _VersionAction(argparse.Action):
         parser.exit(message=f"{parser.prog} {abu.__version__}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``abu`` argument parser with every subcommand."""
-    from abu.cli import camera, demo, export, measure, plan, render, simulate, sweep
+#: Command -> the module of :mod:`abu.cli` that registers it. A command line naming one of
+#: them builds only that module's parsers: the others import the twin, the harness or the
+#: camera calibration (~40 ms of the ~0.7 s budget of ``abu measure``; tests/test_measure_cli.py
+#: checks that this map matches the full parser).
+COMMAND_MODULE = {"build-fmus": "simulate", "simulate": "simulate", "table41": "simulate",
+                  "sweep": "sweep", "demo": "demo", "track": "measure", "measure": "measure",
+                  "measure-summary": "measure", "render": "render",
+                  "calibrate-camera": "camera", "export-ssp": "export", "identify": "plan",
+                  "design": "plan", "next": "plan"}
+_MODULES = ("simulate", "sweep", "demo", "measure", "render", "camera", "export", "plan")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``abu`` argument parser with every subcommand, or with only the commands of the
+    module that registers ``command`` (when it is one of :data:`COMMAND_MODULE`)."""
+    import importlib
 
     parser = AbuArgumentParser(
         prog="abu", description="Static friction of a ball in an automatic balancing unit: "
@@ -54,9 +67,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="show the traceback of an unexpected error (any position)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (simulate, sweep, demo, measure, render, camera, export, plan):
-        module.register(sub)
+    names = (COMMAND_MODULE[command],) if command in COMMAND_MODULE else _MODULES
+    for name in names:
+        importlib.import_module(f"abu.cli.{name}").register(sub)
     return parser
+
+
+def _command_of(argv: Sequence[str] | None) -> str | None:
+    """The command a command line names: its first word that is not an option (the global
+    options, ``--version`` and ``--debug``, take no value); None after a global ``-h`` (the
+    top-level help lists every command)."""
+    for word in sys.argv[1:] if argv is None else argv:
+        if word in ("-h", "--help"):
+            return None
+        if not word.startswith("-"):
+            return word
+    return None
 
 
 def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
@@ -67,7 +93,9 @@ def _rename(args: argparse.Namespace, exc: ParameterError) -> ParameterError:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``abu`` command line; returns the exit status (2 for user errors, 1 for an
     unexpected error, reported in one line; ``--debug`` shows its traceback)."""
-    return run_command(build_parser, argv, rename=_rename, precheck=check_not_applicable)
+    command = _command_of(argv)
+    return run_command(lambda: build_parser(command), argv, rename=_rename,
+                       precheck=check_not_applicable)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -27,10 +27,11 @@ def plot_identify(result, path: Path, figure_format: str = "png") -> Path:
     d = result.drive
     ax.set_title(f"Speed loop fit: zeta = {d.zeta:.4g}, omega_n = {d.omega_n:.4g} rad/s, "
                  f"tau_motor = {d.tau_motor:.3g} s", fontsize=9, loc="left")
-    unit = "rad/s" if result.kind == "omega" else "rad"
+    # the fitted quantity: the speed, or the angle of an optical sensor's pulses
+    what = "speed residual [rad/s]" if result.kind == "omega" else "angle residual [rad]"
     bx.plot(result.t, result.residual, ".", ms=2, color="tab:red", label="record - fit")
     bx.axhline(0.0, color="k", lw=0.5)
-    bx.set_ylabel(f"residual [{unit}]")
+    bx.set_ylabel(what)
     bx.set_xlabel("time [s]")
     bx.set_title(_wrap(f"residual check: {result.check['message']}", 90), fontsize=8, loc="left")
     legend_outside(bx)
@@ -50,7 +51,7 @@ def plot_design(design, path: Path, check: Sequence[dict[str, Any]] | None = Non
     mu = design.mu
     ax.fill_between(mu, design.mu_low, design.mu_high, color="tab:blue", alpha=0.3,
                     label="predicted interval")
-    ax.plot(mu, mu, "k-", lw=0.8, label="mu")
+    ax.plot(mu, mu, "k-", lw=0.8, label="true mu (a bound's target)")
     if check:
         for row in check:
             if row["mu_high"] is not None:
@@ -77,7 +78,8 @@ def plot_design(design, path: Path, check: Sequence[dict[str, Any]] | None = Non
     bx.set_xlabel("mu [-]")
     bx.set_ylabel("slip time in the record [s]")
     legend_outside(bx)
-    ax.set_title(f"Design: {design.omega0_hz:g} Hz -> {design.omega_end_hz:g} Hz, t0 = "
-                 f"{design.t0_s:g} s, te = {design.te_s:.4g} s, {design.rounding} rounding",
+    ax.set_title(f"Staircase: {design.omega0_hz:g} Hz -> {design.omega_end_hz:g} Hz, t0 = "
+                 f"{design.t0_s:g} s, te = {design.te_s:.4g} s, step rounding "
+                 f"'{design.rounding}'",
                  fontsize=9, loc="left")
     return save_fig(fig, path, figure_format)

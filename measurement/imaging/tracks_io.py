@@ -31,7 +31,6 @@ import csv
 import io
 import math
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -296,20 +295,19 @@ def angles_from_pixels(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.nda
     return theta, beta
 
 
-_NAN_CELL = re.compile(r"(?<![^,\n])(?:nan|-?inf)(?![^,\n])")
-
-
 def table_csv_text(names: list[str], cols: list[np.ndarray], float_format: str = "%.10g") -> str:
     """Plain CSV text (header, rows) of equal-length columns; integer columns as integers,
-    non-finite floats as empty cells. Formatted row-wise in C by ``np.savetxt`` (a Python loop
-    over cells cost ~0.3 s of ``abu measure`` for 3072 frames)."""
+    non-finite floats as empty cells. All rows formatted by one ``%`` in C (a Python loop over
+    cells cost ~0.3 s of ``abu measure`` for 3072 frames; ``np.savetxt``'s loop over rows and a
+    regular expression for the non-finite cells, 0.05 s)."""
     arrays = [np.asarray(c) for c in cols]
     fmts = ["%d" if np.issubdtype(a.dtype, np.integer) else float_format for a in arrays]
     data = np.column_stack([a.astype(float) for a in arrays]) if arrays else np.zeros((0, 0))
-    buf = io.StringIO()
-    buf.write(",".join(names) + "\n")
-    np.savetxt(buf, data, fmt=fmts, delimiter=",")
-    return _NAN_CELL.sub("", buf.getvalue())
+    body = ((",".join(fmts) + "\n") * data.shape[0]) % tuple(data.ravel().tolist()) \
+        if data.size else ""
+    # a formatted number holds no letter but 'e': "nan", "inf" and "-inf" are whole cells
+    body = body.replace("-inf", "").replace("inf", "").replace("nan", "")
+    return ",".join(names) + "\n" + body
 
 
 def format_tracks_csv(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, x: np.ndarray,

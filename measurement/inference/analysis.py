@@ -30,7 +30,6 @@ from measurement.inference.slip_model import signed_mu_req
 from measurement.inference import uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
-from measurement.kinematics import drive_model
 from measurement.kinematics import estimators as kin_mod
 from measurement.kinematics import harmonic as harmonic_mod
 
@@ -42,6 +41,8 @@ class AnalysisError(AbuError, ValueError):
 def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
     kin = _estimator(time, theta, opt)
     if opt.kinematics == "drive-model":
+        # imported only for this option (it loads the loop response and the drive file code)
+        from measurement.kinematics import drive_model
         return drive_model.apply(kin, theta, opt.drive_model)
     return kin
 

@@ -39,7 +39,9 @@ class SlipModelCache:
 
     def rows(self, mu: np.ndarray, mud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(model rows [rad], onset times [s]) for candidate pairs (mu, mu_d)."""
-        keys = [(float(a), float(b), self.t.size) for a, b in zip(mu, mud)]
+        n = self.t.size
+        keys = [(a, b, n) for a, b in zip(np.asarray(mu, float).tolist(),
+                                           np.asarray(mud, float).tolist())]
         missing = sorted({k for k in keys if k not in self._rows})
         if missing:
             self._integrate(missing)
@@ -61,7 +63,7 @@ class SlipModelCache:
             disp, onset = slip_displacement(
                 t[c0:], self.q[c0:], self.omega[c0:], mus, np.array([k[1] for k in missing]),
                 self.direction, self.d_over_l, max_episodes=self.max_episodes)
-            rows[:, c0:] = self.direction * disp
+            np.multiply(disp, self.direction, out=rows[:, c0:])
         for r, k in enumerate(missing):
             self._rows[k] = (rows[r], float(onset[r]))
 

@@ -34,59 +34,91 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
     """
     mu = np.asarray(mu, float)[:, None]
     mud = np.asarray(mu_d, float)[:, None]
-    n = t.size
+    m_rows, n = mu.shape[0], t.size
     h = float(t[1] - t[0])
-    idx = np.arange(n)[None, :]
     w = np.asarray(omega, float)[None, :]
     qq = np.asarray(q, float)[None, :]
-    g = w * w * (qq - mud) / 1.4                             # (M, N) drive of u' [rad/s^2]
-    c = mud * float(direction) * w * (2.0 - 0.2 * d_over_l) / 1.4   # u' = g - c u
-    cumc = np.concatenate([np.zeros((mu.shape[0], 1)),
-                           np.cumsum(0.5 * (c[:, 1:] + c[:, :-1]) * h, axis=1)], axis=1)
-    cumc -= cumc[:, :1]
-    e = np.exp(np.clip(cumc, -50.0, 50.0))                   # integrating factor
-    eg = e * g
-    inc = 0.5 * (eg[:, 1:] + eg[:, :-1]) * h
-    cs = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(inc, axis=1)], axis=1)
+    # in place, the same operations in the same order as the plain expressions
+    g = qq - mud
+    g *= w * w
+    g /= 1.4                                                 # (M, N) drive of u' [rad/s^2]
+    c = mud * float(direction) * w
+    c *= 2.0 - 0.2 * d_over_l
+    c /= 1.4                                                 # u' = g - c u
+    cumc = np.zeros((m_rows, n))
+    np.cumsum(_trapezoids(c, h), axis=1, out=cumc[:, 1:])
+    np.clip(cumc, -50.0, 50.0, out=cumc)
+    e = np.exp(cumc, out=cumc)                               # integrating factor
+    cs = np.zeros((m_rows, n))
+    np.cumsum(_trapezoids(e * g, h), axis=1, out=cs[:, 1:])
     above = qq > mu                                          # (M, N) slip condition
-    disp = np.zeros((mu.shape[0], n))
-    onset_first = np.full(mu.shape[0], np.inf)
-    rows = np.arange(mu.shape[0])
-    start = np.zeros(mu.shape[0], dtype=int)                 # search onsets from here
+    disp = np.zeros((m_rows, n))
+    onset_first = np.full(m_rows, np.inf)
+    rows = np.flatnonzero(above.any(axis=1))                 # rows with an onset ahead
+    i_s = np.argmax(above[rows], axis=1)                     # ... and its sample
+    start = np.zeros(rows.size, dtype=int)                   # where its search began
     for _ in range(int(max_episodes)):
-        cand = above & (idx >= start[:, None])
-        has = cand.any(axis=1)
-        if not has.any():
+        # Only the rows with an onset still ahead are integrated, on the columns from just
+        # before their earliest onset: the others add nothing, the leading columns are 0 and
+        # sum exactly, so the numbers are those of the whole-array loop.
+        if rows.size == 0:
             break
-        i_s = np.where(has, np.argmax(cand, axis=1), n)
-        # sub-sample onset between i_s - 1 and i_s (q crosses mu there)
-        prev = np.clip(i_s - 1, 0, n - 1)
-        ii = np.clip(i_s, 0, n - 1)
-        q0, q1 = q[prev], q[ii]
-        frac = np.where((i_s > start) & (q1 > q0),
-                        (mu[:, 0] - q0) / np.where(q1 > q0, q1 - q0, 1.0), 1.0)
-        frac = np.clip(frac, 0.0, 1.0)
-        delta = (1.0 - frac) * h                             # time from onset to t[i_s]
-        t_on = t[ii] - delta
-        onset_first = np.where(np.isinf(onset_first) & has, t_on, onset_first)
-        g_on = np.asarray(omega, float)[prev] ** 2 * (mu[:, 0] - mud[:, 0]) / 1.4
-        u_is = 0.5 * (g_on + g[rows, ii]) * delta             # slip speed at t[i_s]
-        d_is = 0.5 * u_is * delta
-        # u_n = [E_is u_is + CS_n - CS_is] / E_n for n >= i_s
-        base = e[rows, ii] * u_is - cs[rows, ii]
-        u = (base[:, None] + cs) / e
-        live = (idx >= i_s[:, None]) & has[:, None]
-        stop = live & (u < 0.0)
-        stop_any = stop.any(axis=1)
-        j = np.where(stop_any, np.argmax(stop, axis=1), n)  # first re-stick sample
-        u = np.where(live & (idx < j[:, None]), u, 0.0)
-        # displacement: trapezoid of u from t[i_s] on, plus the partial first interval
-        du = 0.5 * (u[:, 1:] + u[:, :-1]) * h
-        cd = np.concatenate([np.zeros((mu.shape[0], 1)), np.cumsum(du, axis=1)], axis=1)
-        cd = cd - cd[rows, ii][:, None]
-        ep = np.where(idx >= i_s[:, None], d_is[:, None] + cd, 0.0)
-        ep = np.where(has[:, None], ep, 0.0)
-        disp = disp + ep
-        # after the re-stick the next episode starts at j (or ends the record)
-        start = np.where(stop_any & has, j, n)
+        sub = slice(None) if rows.size == m_rows else rows
+        t_on, ep, c0, j = _episode(t, q, omega, mu[rows, 0], mud[rows, 0], g[rows, i_s],
+                                   e[sub], cs[sub], i_s, start, h)
+        onset_first[rows] = np.where(np.isinf(onset_first[rows]), t_on, onset_first[rows])
+        disp[sub, c0:] = disp[sub, c0:] + ep
+        # after the re-stick the next episode starts at j (a row that never re-sticks ends)
+        keep = j < n
+        rows, start = rows[keep], j[keep]
+        cand = above[rows] & (np.arange(n)[None, :] >= start[:, None])
+        has = cand.any(axis=1)
+        rows, start, i_s = rows[has], start[has], np.argmax(cand[has], axis=1)
     return disp, onset_first
+
+
+def _episode(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
+             mud: np.ndarray, g_is: np.ndarray, e: np.ndarray, cs: np.ndarray,
+             i_s: np.ndarray, start: np.ndarray, h: float
+             ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """One slip episode of the rows starting at sample ``i_s`` (q first above mu there; g_is
+    the drive there): (onset time [s], displacement [rad] from column c0 on, c0, re-stick
+    sample (n: none))."""
+    n = t.size
+    rows = np.arange(i_s.size)
+    # sub-sample onset between i_s - 1 and i_s (q crosses mu there)
+    prev = np.clip(i_s - 1, 0, n - 1)
+    q0, q1 = q[prev], q[i_s]
+    frac = np.where((i_s > start) & (q1 > q0), (mu - q0) / np.where(q1 > q0, q1 - q0, 1.0),
+                    1.0)
+    delta = (1.0 - np.clip(frac, 0.0, 1.0)) * h              # time from onset to t[i_s]
+    t_on = t[i_s] - delta
+    g_on = np.asarray(omega, float)[prev] ** 2 * (mu - mud) / 1.4
+    u_is = 0.5 * (g_on + g_is) * delta                        # slip speed at t[i_s]
+    d_is = 0.5 * u_is * delta
+    c0 = int(prev.min())                                      # columns before c0 stay 0
+    idx = np.arange(c0, n)[None, :]
+    # u_n = [E_is u_is + CS_n - CS_is] / E_n for n >= i_s
+    base = e[rows, i_s] * u_is - cs[rows, i_s]
+    u = cs[:, c0:] + base[:, None]
+    u /= e[:, c0:]
+    live = idx >= i_s[:, None]
+    stop = live & (u < 0.0)
+    stop_any = stop.any(axis=1)
+    j = np.where(stop_any, np.argmax(stop, axis=1) + c0, n)  # first re-stick sample
+    u[~(live & (idx < j[:, None]))] = 0.0
+    # displacement: trapezoid of u from t[i_s] on, plus the partial first interval
+    ep = np.zeros(u.shape)
+    np.cumsum(_trapezoids(u, h), axis=1, out=ep[:, 1:])
+    ep -= ep[rows, i_s - c0][:, None]
+    ep += d_is[:, None]
+    ep[~live] = 0.0
+    return t_on, ep, c0, j
+
+
+def _trapezoids(a: np.ndarray, h: float) -> np.ndarray:
+    """0.5 (a[:, k+1] + a[:, k]) h: the trapezoid areas between neighbouring columns."""
+    out = a[:, 1:] + a[:, :-1]
+    out *= 0.5
+    out *= h
+    return out
