@@ -5,9 +5,18 @@ centroids), all measured in the same run; reading a recording timed apart.
     pip install trackpy   # BSD; for this benchmark only (skipped with a note if missing)
     python3 benchmarks/bench_tracking.py [--frames 3072] [--repeats 3] [--folder]
 
-Issue 20's target: >= 30,000 frames/s on one core at <= 0.012 px RMS error (the default
-method, the first rows printed). Times are wall times of the best of ``--repeats`` and the
-process CPU time of the same calls (``time.process_time``; compare those on a loaded machine).
+Issue 20's target: >= 30,000 frames/s on one core at <= 0.012 px RMS error on every marker
+(the default method, the first row printed). Times are the process CPU time
+(``time.process_time``) of the best of ``--repeats`` calls; on a shared machine compare the
+'x baseline' column (the plain cv2.moments tracker timed in the same run).
+
+The default method runs the compiled kernels (``measurement/imaging/_trackc.c``, built by
+``pip install -e .``); the row 'isocontour (NumPy)' is the same method on its NumPy/OpenCV
+fallback (same positions to 1e-9 px). Measured (3072 frames, CPU time, the machine shared with
+other jobs): the default 39,600 frames/s (1.0x the plain cv2.moments tracker, 8.8x the
+camera) at 0.0109 / 0.0123 / 0.0102 px RMS (centre, CD, ball); before the kernels 15,300
+frames/s (0.39x). The CD marker's 0.0123 px is above the target; its bound is discussed in
+docs/measurement-imaging.md.
 
 The recording is rendered by twin.render (3072 frames of 256x256 px, three markers, the
 report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the
@@ -32,6 +41,7 @@ import numpy as np  # noqa: E402
 from measurement.imaging.frames_io import (read_recording, write_frame_folder,  # noqa: E402
                                    write_multipage_tiff, write_npy)
 from twin.render import CameraGeometry, RenderSettings, render_frames  # noqa: E402
+from measurement.imaging import track_passes  # noqa: E402
 from measurement.imaging.tracking import METHODS, track_recording  # noqa: E402
 
 CAMERA_FPS = 4500.0
@@ -160,20 +170,27 @@ def main() -> None:
     print(f"\nbaseline, plain cv2.moments tracker: {t_base:.3f} s = {n / t_base:.0f} frames/s "
           f"= {n / t_base / CAMERA_FPS:.2f} x camera; RMS error "
           f"{np.array2string(base_rms, precision=4)} px (centre, CD, ball)")
-    print(f"{'method':<12} {'time [s]':>9} {'frames/s':>9} {'x camera':>9} {'x baseline':>11}"
+    print(f"{'method':<19} {'time [s]':>9} {'frames/s':>9} {'x camera':>9} {'x baseline':>11}"
           f"  RMS error [px] centre, CD, ball   lost")
-    for method in METHODS:
-        t_m, tracks = best_time(lambda: track_recording(frames, seeds, method=method),
-                                args.repeats)
+    kernel = track_passes._trackc
+    runs = [(m + (" *" if m == "isocontour" else ""), m, kernel) for m in METHODS]
+    runs.insert(1, ("isocontour (NumPy)", "isocontour", None))
+    for label, method, use in runs:
+        track_passes._trackc = use
+        try:
+            t_m, tracks = best_time(lambda: track_recording(frames, seeds, method=method),
+                                    args.repeats)
+        finally:
+            track_passes._trackc = kernel
         err = rms_error(tracks.x, tracks.y, truth)
         fps = n / t_m
-        label = method + (" *" if method == "isocontour" else "")
-        print(f"{label:<12} {t_m:9.3f} {fps:9.0f} {fps / CAMERA_FPS:9.2f} "
+        print(f"{label:<19} {t_m:9.3f} {fps:9.0f} {fps / CAMERA_FPS:9.2f} "
               f"{t_base / t_m:11.2f}  {np.array2string(err, precision=4):<30} "
               f"{int(tracks.lost.sum())}")
     print("* default method. 'x camera' > 1: faster than the camera records; 'x baseline': "
           "speed relative to the plain cv2.moments tracker (which has no lost-marker tests). "
-          "Times: CPU time of the best of the repeats.")
+          "Times: CPU time of the best of the repeats. Compiled kernels: "
+          + ("built" if kernel is not None else "NOT built (pip install -e .): the NumPy path"))
     bench_trackpy(frames, seeds, truth, t_base / n)
     bench_two_reflections(args.repeats)
 

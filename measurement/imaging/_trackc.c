@@ -65,6 +65,20 @@ static PyObject *seeded(PyObject *Py_UNUSED(self), PyObject *args)
         Py_BEGIN_ALLOW_THREADS
         for (Py_ssize_t k = 0; k < nf; k++) {
             const uint8_t *frame = frames + k * h * w;
+#if defined(__GNUC__)
+            /* ask for the next frame's windows now: the rows come from memory, not cache */
+            if (k + 1 < nf)
+                for (Py_ssize_t m = 0; m < mc; m++) {
+                    Py_ssize_t x0 = (Py_ssize_t)(px[m] + 2.0 * vx[m]) - half;
+                    Py_ssize_t y0 = (Py_ssize_t)(py[m] + 2.0 * vy[m]) - half;
+                    if (x0 < 0 || y0 < 0 || x0 + win > w || y0 + win > h) continue;
+                    const uint8_t *nxt = frame + h * w + y0 * w + x0;
+                    for (Py_ssize_t i = 0; i < win; i++) {
+                        __builtin_prefetch(nxt + i * w);
+                        __builtin_prefetch(nxt + i * w + win - 1);
+                    }
+                }
+#endif
             for (Py_ssize_t m = 0; m < mc; m++) {
                 double qx = px[m] + vx[m], qy = py[m] + vy[m];
                 Py_ssize_t x0 = (Py_ssize_t)rne(qx) - half, y0 = (Py_ssize_t)rne(qy) - half;
@@ -201,10 +215,95 @@ static double dist2(double x, double y, double a, double b, double r)
 typedef struct {
     Py_ssize_t win, nring;
     const int64_t *ring;
+    const double *ring_x, *ring_y;  /* the ring pixels' x - cc, y - cc [px] */
     const double *pinv;   /* (3, nring) */
     int smooth;
     double min_contrast, min_snr, r_min, r_max, max_residual, min_points;
+    /* the edge step (edge_step.py): on/off, blur s, band, longest step, Phi and phi tables */
+    int edge;
+    double edge_width, edge_band, edge_max_step, tab_half, tab_per_unit;
+    const double *phi, *dphi;
+    Py_ssize_t ntab;
 } RefineOpts;
+
+/* linear interpolation in the tables of Phi and phi at u, as edge_step._lookup */
+static void lookup2(const RefineOpts *o, double u, double *f, double *fp)
+{
+    if (u < -o->tab_half) u = -o->tab_half;
+    if (u > o->tab_half) u = o->tab_half;
+    double q = (u + o->tab_half) * o->tab_per_unit;
+    Py_ssize_t i = (Py_ssize_t)q;  /* q >= 0: truncation is floor */
+    if (i > o->ntab - 2) i = o->ntab - 2;
+    double t = q - (double)i;
+    *f = o->phi[i] + t * (o->phi[i + 1] - o->phi[i]);
+    *fp = o->dphi[i] + t * (o->dphi[i + 1] - o->dphi[i]);
+}
+
+/* Solve the n x n system A x = g (row-major, overwritten) by elimination with partial
+ * pivoting; 0 if singular or not finite. */
+static int solve_n(double *A, double *g, int n, double *x)
+{
+    for (int c = 0; c < n; c++) {
+        int p = c;
+        for (int i = c + 1; i < n; i++)
+            if (fabs(A[i * n + c]) > fabs(A[p * n + c])) p = i;
+        if (p != c) {
+            for (int j = 0; j < n; j++) {
+                double t = A[c * n + j]; A[c * n + j] = A[p * n + j]; A[p * n + j] = t;
+            }
+            double t = g[c]; g[c] = g[p]; g[p] = t;
+        }
+        if (!(A[c * n + c] != 0.0) || !isfinite(A[c * n + c])) return 0;
+        for (int i = c + 1; i < n; i++) {
+            double l = A[i * n + c] / A[c * n + c];
+            for (int j = c; j < n; j++) A[i * n + j] -= l * A[c * n + j];
+            g[i] -= l * g[c];
+        }
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double v = g[i];
+        for (int j = i + 1; j < n; j++) v -= A[i * n + j] * x[j];
+        x[i] = v / A[i * n + i];
+    }
+    return 1;
+}
+
+/* One Gauss-Newton step of I = o + C Phi((r - |p - (a, b)|) / s) on the pixels within the
+ * band of the circle (edge_step.edge_step); moves *a, *b unless it fails or is too long. */
+static void edge_step(const double *H, Py_ssize_t w, double *a, double *b, double r, double C,
+                      const RefineOpts *o)
+{
+    if (!isfinite(*a) || !isfinite(*b) || !isfinite(r)) return;
+    double A[25] = {0.0}, g[5] = {0.0}, J[5], st[5];
+    const double s = o->edge_width;
+    /* only the box around the band can hold band pixels */
+    double reach = r + o->edge_band;
+    Py_ssize_t i0 = (Py_ssize_t)floor(*b - reach), i1 = (Py_ssize_t)ceil(*b + reach);
+    Py_ssize_t j0 = (Py_ssize_t)floor(*a - reach), j1 = (Py_ssize_t)ceil(*a + reach);
+    if (i0 < 0) i0 = 0;
+    if (j0 < 0) j0 = 0;
+    if (i1 > w - 1) i1 = w - 1;
+    if (j1 > w - 1) j1 = w - 1;
+    for (Py_ssize_t i = i0; i <= i1; i++)
+        for (Py_ssize_t j = j0; j <= j1; j++) {
+            double dx = (double)j - *a, dy = (double)i - *b;
+            double d = sqrt(dx * dx + dy * dy), e = r - d;
+            if (!(fabs(e) < o->edge_band) || !(d > 0.0)) continue;
+            double u = e / s, f, fp;
+            lookup2(o, u, &f, &fp);
+            double cfp = C * (fp / s);
+            double res = H[i * w + j] - C * f;
+            J[0] = cfp * dx / d; J[1] = cfp * dy / d; J[2] = cfp; J[3] = f; J[4] = 1.0;
+            for (int p = 0; p < 5; p++) {
+                g[p] += J[p] * res;
+                for (int q = 0; q <= p; q++) A[p * 5 + q] += J[p] * J[q];
+            }
+        }
+    for (int p = 0; p < 5; p++)
+        for (int q = p + 1; q < 5; q++) A[p * 5 + q] = A[q * 5 + p];
+    if (!solve_n(A, g, 5, st) || !isfinite(st[0]) || !isfinite(st[1])) return;
+    if (hypot(st[0], st[1]) <= o->edge_max_step) { *a += st[0]; *b += st[1]; }
+}
 
 /* One window: G (win*win doubles, bright marker) -> a, b, r, code. Work arrays: T1, T2 of
  * win*win doubles, px/py/dd of 2*win*win doubles, above of win*win bytes. */
@@ -222,8 +321,7 @@ static void refine_one(double *G, const RefineOpts *o, double *T1, double *T2, d
     }
     double mean = 0.0;
     for (Py_ssize_t q = 0; q < nr; q++) {
-        Py_ssize_t p = o->ring[q];
-        double res = G[p] - (c0 + c1 * ((double)(p % w) - cc) + c2 * ((double)(p / w) - cc));
+        double res = G[o->ring[q]] - (c0 + c1 * o->ring_x[q] + c2 * o->ring_y[q]);
         T1[q] = res; mean += res;
     }
     mean /= (double)nr;
@@ -318,29 +416,40 @@ static void refine_one(double *G, const RefineOpts *o, double *T1, double *T2, d
         touches = above[j] || above[(ws - 1) * ws + j] || above[j * ws] || above[j * ws + ws - 1];
     if (touches) code = TOUCHES_EDGE;
     if (peak < o->min_contrast || peak < o->min_snr * noise) code = LOW_CONTRAST;
+    if (o->edge) edge_step(G, w, &a2, &b2, r2, peak, o);
     *oa = a2; *ob = b2; *orr = r2; *ocode = (uint8_t)code;
 }
 
 static PyObject *refine(PyObject *Py_UNUSED(self), PyObject *args)
 {
-    Py_buffer fb, bfi, bx0, by0, bring, bpinv, ba, bb, br, bc;
+    Py_buffer fb, bfi, bx0, by0, bring, bpinv, bphi, bdphi, ba, bb, br, bc;
     Py_ssize_t nf, h, w, K, win;
     int dark;
     RefineOpts o;
-    if (!PyArg_ParseTuple(args, "y*nnny*y*y*nnpy*y*pddddddw*w*w*w*", &fb, &nf, &h, &w, &bfi,
-                          &bx0, &by0, &K, &win, &dark, &bring, &bpinv, &o.smooth,
+    if (!PyArg_ParseTuple(args, "y*nnny*y*y*nnpy*y*pddddddpddddy*y*w*w*w*w*", &fb, &nf, &h,
+                          &w, &bfi, &bx0, &by0, &K, &win, &dark, &bring, &bpinv, &o.smooth,
                           &o.min_contrast, &o.min_snr, &o.r_min, &o.r_max, &o.max_residual,
-                          &o.min_points, &ba, &bb, &br, &bc))
+                          &o.min_points, &o.edge, &o.edge_width, &o.edge_band,
+                          &o.edge_max_step, &o.tab_half, &bphi, &bdphi, &ba, &bb, &br, &bc))
         return NULL;
     PyObject *ret = NULL;
     double *work = NULL;
     o.win = win;
     o.nring = bring.len / 8;
+    o.ntab = bphi.len / 8;
+    o.phi = bphi.buf;
+    o.dphi = bdphi.buf;
+    o.tab_per_unit = (o.ntab - 1) / (2.0 * o.tab_half);
     if (!need(&fb, nf * h * w, "frames") || !need(&bfi, K * 8, "frame_index")
         || !need(&bx0, K * 8, "x0") || !need(&by0, K * 8, "y0")
         || !need(&bpinv, 3 * o.nring * 8, "pinv") || !need(&ba, K * 8, "a")
-        || !need(&bb, K * 8, "b") || !need(&br, K * 8, "r") || !need(&bc, K, "code"))
+        || !need(&bb, K * 8, "b") || !need(&br, K * 8, "r") || !need(&bc, K, "code")
+        || !need(&bdphi, o.ntab * 8, "dphi"))
         goto done;
+    if (o.ntab < 2 || !(o.tab_half > 0.0) || !(o.edge_width > 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "_trackc: bad edge-step table or width");
+        goto done;
+    }
     const int64_t *fi = bfi.buf, *x0 = bx0.buf, *y0 = by0.buf;
     o.ring = bring.buf;
     o.pinv = bpinv.buf;
@@ -356,22 +465,31 @@ static PyObject *refine(PyObject *Py_UNUSED(self), PyObject *args)
             goto done;
         }
     Py_ssize_t n = win * win;
-    work = malloc(sizeof(double) * (3 * n + 6 * n) + n);
+    work = malloc(sizeof(double) * (3 * n + 6 * n + 2 * o.nring) + n);
     if (!work) { PyErr_NoMemory(); goto done; }
     {
+        double *rx = work + 9 * n, *ry = rx + o.nring;
+        for (Py_ssize_t q = 0; q < o.nring; q++) {
+            rx[q] = (double)(o.ring[q] % win) - (win - 1) / 2.0;
+            ry[q] = (double)(o.ring[q] / win) - (win - 1) / 2.0;
+        }
+        o.ring_x = rx;
+        o.ring_y = ry;
         double *G = work, *T1 = G + n, *T2 = T1 + n, *px = T2 + n, *py = px + 2 * n;
         double *dd = py + 2 * n;
-        uint8_t *above = (uint8_t *)(dd + 2 * n);
+        uint8_t *above = (uint8_t *)(ry + o.nring);
         const uint8_t *frames = fb.buf;
         const int inv = dark ? 255 : 0;
         double *oa = ba.buf, *ob = bb.buf, *orr = br.buf;
         uint8_t *oc = bc.buf;
         Py_BEGIN_ALLOW_THREADS
+        double lut[256];  /* grey level -> double (inverted for dark markers) */
+        for (int v = 0; v < 256; v++) lut[v] = (double)(v ^ inv);
         for (Py_ssize_t k = 0; k < K; k++) {
             const uint8_t *src = frames + fi[k] * h * w + y0[k] * w + x0[k];
             for (Py_ssize_t i = 0; i < win; i++)
                 for (Py_ssize_t j = 0; j < win; j++)
-                    G[i * win + j] = (double)(src[i * w + j] ^ inv);
+                    G[i * win + j] = lut[src[i * w + j]];
             refine_one(G, &o, T1, T2, px, py, dd, above, oa + k, ob + k, orr + k, oc + k);
         }
         Py_END_ALLOW_THREADS
@@ -381,6 +499,7 @@ done:
     free(work);
     PyBuffer_Release(&fb); PyBuffer_Release(&bfi); PyBuffer_Release(&bx0);
     PyBuffer_Release(&by0); PyBuffer_Release(&bring); PyBuffer_Release(&bpinv);
+    PyBuffer_Release(&bphi); PyBuffer_Release(&bdphi);
     PyBuffer_Release(&ba); PyBuffer_Release(&bb); PyBuffer_Release(&br); PyBuffer_Release(&bc);
     return ret;
 }
@@ -392,8 +511,9 @@ static PyMethodDef methods[] = {
      "is updated in place."},
     {"refine", refine, METH_VARARGS,
      "refine(frames, nf, h, w, frame_index, x0, y0, K, window, dark, ring, pinv, smooth, "
-     "min_contrast, min_snr, r_min, r_max, max_residual, min_points, a, b, r, code): the "
-     "isocontour method on K windows."},
+     "min_contrast, min_snr, r_min, r_max, max_residual, min_points, edge_step, edge_width, "
+     "edge_band, edge_max_step, table_half, phi, dphi, a, b, r, code): the isocontour method "
+     "on K windows."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_trackc",

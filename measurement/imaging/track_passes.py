@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from measurement.imaging import edge_step as E
 from measurement.imaging import window_fits as W
 from measurement.imaging.window_fits import JUMP, LOW_CONTRAST, OK, OUTSIDE, TrackingOptions
 
@@ -191,7 +192,9 @@ def _refine_compiled(chunk: np.ndarray, fi: np.ndarray, x0: np.ndarray, y0: np.n
     _trackc.refine(chunk, nf, hgt, wid, fi, x0, y0, K, window, bool(dark), ring,
                    geo.plane_pinv64, bool(opts.smooth), float(opts.min_contrast),
                    float(opts.min_snr), float(opts.r_min), float(r_max),
-                   float(opts.max_residual), float(opts.min_points), a, b, r, code)
+                   float(opts.max_residual), float(opts.min_points), bool(opts.edge_step),
+                   float(opts.edge_width_px), E.BAND_PX, E.MAX_STEP_PX, E.TABLE_HALF, E.PHI,
+                   E.DPHI, a, b, r, code)
     return a, b, r, code
 
 

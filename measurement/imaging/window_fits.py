@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from measurement.imaging.edge_step import edge_step
+
 @dataclass(frozen=True)
 class TrackingOptions:
     """Tuning of the tracker; the defaults suit markers of radius 3-10 px in a 30 px window.
@@ -37,6 +39,10 @@ class TrackingOptions:
             interpolation between pixel centres err by up to ~0.1 px per contour point, with a
             pattern that depends on the sub-pixel position; the smoothing cuts that systematic
             error about threefold at a small cost in noise (see docs/measurement-imaging.md).
+        edge_step: end the ``isocontour`` method with one Gauss-Newton step of a blurred-disk
+            model on the pixels near the edge (:mod:`measurement.imaging.edge_step`): 20-30 %
+            less RMS error on rendered markers.
+        edge_width_px: the model's edge blur s (normal CDF) [px].
     """
 
     min_contrast: float = 12.0
@@ -49,6 +55,8 @@ class TrackingOptions:
     min_points: int = 8
     report_levels: tuple[float, ...] = (0.3, 0.4, 0.5, 0.6, 0.7)
     smooth: bool = True
+    edge_step: bool = True
+    edge_width_px: float = 0.4
 
 
 
@@ -216,6 +224,7 @@ def refine_isocontour(G: np.ndarray, geo: WindowGeometry, opts: TrackingOptions
     noise = (ring - np.einsum("kc,cp->kp", coef, geo.plane_basis64[:, geo.ring])).std(axis=1)
     flat = flat - np.einsum("kc,cp->kp", coef, geo.plane_basis64)       # lighting removed
     G2 = flat.reshape(K, w, w)
+    H = G2
     off = 0
     if opts.smooth:
         # symmetric smoothing moves no centre; a plane stays a plane, so order is free
@@ -239,6 +248,8 @@ def refine_isocontour(G: np.ndarray, geo: WindowGeometry, opts: TrackingOptions
                | above[:, :, 0].any(axis=1) | above[:, :, -1].any(axis=1))
     reason[touches] = TOUCHES_EDGE
     reason[(peak < opts.min_contrast) | (peak < opts.min_snr * noise)] = LOW_CONTRAST
+    if opts.edge_step:
+        a, b = edge_step(H, a, b, r, peak, opts.edge_width_px)
     return a, b, r, reason
 
 
