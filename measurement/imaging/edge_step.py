@@ -66,16 +66,19 @@ def edge_step(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, C: np.
     dy = jj[None, :, None] - b0[:, None, None]                      # (K, w, 1)
     d = np.sqrt(dx * dx + dy * dy)                                  # (K, w, w)
     e = r0[:, None, None] - d
-    band = (np.abs(e) < BAND_PX) & (d > 0.0)
-    u = e / width_px
+    k, i, j = np.nonzero((np.abs(e) < BAND_PX) & (d > 0.0))        # the band's pixels
+    ds = d[k, i, j]
+    u = e[k, i, j] / width_px
     f = _lookup(PHI, u)
-    cfp = C[:, None, None] * (_lookup(DPHI, u) / width_px)
-    res = H - C[:, None, None] * f
-    with np.errstate(invalid="ignore", divide="ignore"):
-        J = [cfp * dx / d, cfp * dy / d, cfp, f, np.ones_like(f)]
-    J = np.stack([np.where(band, v, 0.0).reshape(K, w * w) for v in J], axis=2)  # (K, P, 5)
-    A = np.einsum("kpi,kpj->kij", J, J)
-    g = np.einsum("kpi,kp->ki", J, np.where(band, res, 0.0).reshape(K, w * w))
+    cfp = C[k] * (_lookup(DPHI, u) / width_px)
+    res = H[k, i, j] - C[k] * f
+    J = [cfp * (j - a0[k]) / ds, cfp * (i - b0[k]) / ds, cfp, f, np.ones_like(f)]
+    A = np.empty((K, 5, 5))
+    g = np.empty((K, 5))
+    for p in range(5):
+        g[:, p] = np.bincount(k, weights=J[p] * res, minlength=K)
+        for q in range(p + 1):
+            A[:, p, q] = A[:, q, p] = np.bincount(k, weights=J[p] * J[q], minlength=K)
     with np.errstate(invalid="ignore", over="ignore"):
         det = np.linalg.det(A)
     ok &= np.isfinite(det) & (det != 0.0)
