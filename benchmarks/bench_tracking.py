@@ -12,12 +12,13 @@ Issue 20's target: >= 30,000 frames/s on one core at <= 0.012 px RMS error on ev
 
 The default method runs the compiled kernels (``measurement/imaging/_trackc.c``, built by
 ``pip install -e .``); the row 'isocontour (NumPy)' is the same method on its NumPy/OpenCV
-fallback (same positions to 1e-9 px). Measured (3072 frames, CPU time, the machine shared with
-other jobs at load ~10 on two cores): the default 37,200 frames/s (0.82x the plain
-cv2.moments tracker's 45,100 in the same run, 8.3x the camera) at 0.0077 / 0.0100 / 0.0083 px
-RMS (centre, CD, ball); the NumPy fallback 4,100 frames/s; before the kernels and the edge
-step 15,300 frames/s (0.39x the cv2.moments tracker's 39,500 in that run) at 0.0109 / 0.0123 /
-0.0102 px. Target met on every marker.
+fallback (same positions to 1e-9 px). Measured (3072 frames, CPU time, a fresh venv after
+``pip install -e .``, the machine shared with other jobs at load ~12 on two cores): the default
+34,500 frames/s (0.78x the plain cv2.moments tracker's 44,200 in the same run, 7.7x the
+camera; 0.82x in a second run) at 0.0077 / 0.0100 / 0.0083 px RMS (centre, CD, ball); the
+NumPy fallback 4,700 frames/s; before the kernels and the edge step 15,300 frames/s (0.39x the
+cv2.moments tracker's 39,500 in that run) at 0.0109 / 0.0123 / 0.0102 px. Target met on every
+marker.
 
 The recording is rendered by twin.render (3072 frames of 256x256 px, three markers, the
 report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the

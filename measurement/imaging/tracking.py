@@ -34,10 +34,10 @@ with the same results (tests/test_tracking_kernels.py: seeded pass identical, po
 1e-9 px).
 
 Speed (benchmarks/bench_tracking.py, 3072 frames of 256x256 px, 3 markers, one core, CPU
-time): the default method with the kernels runs at ~37,000 frames/s (8x the camera's 4500
-frames/s, 0.8-1.0x a plain ``cv2.moments`` tracker without sub-pixel fit or lost-marker tests),
+time): the default method with the kernels runs at ~35,000 frames/s (~8x the camera's 4500
+frames/s, ~0.8x a plain ``cv2.moments`` tracker without sub-pixel fit or lost-marker tests),
 at 0.0077 / 0.0100 / 0.0083 px RMS on the rendered staircase recording; the NumPy fallback at
-~4,000 frames/s. Measured accuracy is in docs/measurement-imaging.md.
+~4,500 frames/s. Measured accuracy is in docs/measurement-imaging.md.
 
 A marker is flagged ``lost`` in a frame (and its coordinates set to NaN) when: the window leaves
 the image; the contrast is too low (below ``min_contrast`` grey levels or ``min_snr`` times the
