@@ -7,8 +7,9 @@
  * re-reading (K, 30, 30) temporaries (~110 ms). Here each window stays in L1 cache.
  *
  * Both kernels do the same arithmetic, in the same order, as the NumPy code they replace
- * (tracking._seeded_moments_py and window_fits.refine_isocontour): the seeded pass is exact
- * (integer moments), the refinement agrees to ~1e-12 px (sums in another order; tested).
+ * (track_passes._seeded_chunk_py, window_fits.refine_isocontour and edge_step.edge_step): the
+ * seeded pass is exact (integer moments), the refinement agrees to ~1e-13 px (some sums in
+ * another order; tests/test_tracking_kernels.py).
  *
  * A plain CPython extension: arrays arrive through the buffer protocol (C-contiguous, checked
  * by the Python wrapper), so no NumPy headers are needed to build it.
@@ -21,9 +22,8 @@
 #include <string.h>
 
 /* reason codes, as window_fits.OK ... JUMP */
-enum { OK = 0, OUTSIDE = 1, LOW_CONTRAST = 2, TOUCHES_EDGE = 3, FIT_FAILED = 4 };
-#define BAD_RADIUS 5
-#define JUMP 6
+enum { OK = 0, OUTSIDE = 1, LOW_CONTRAST = 2, TOUCHES_EDGE = 3, FIT_FAILED = 4, BAD_RADIUS = 5,
+       JUMP = 6 };
 
 static int need(Py_buffer *b, Py_ssize_t bytes, const char *name)
 {
