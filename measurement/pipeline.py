@@ -68,7 +68,7 @@ class TrackingSettings:
     ball_reflections: int = 1
     ball_method: str = "outline"
     progress: bool = False
-    edge_step: bool = True
+    edge_step: bool = False
 
 
 @dataclass

@@ -11,7 +11,7 @@ issue 18's honesty changes: the running max's ``status`` says what its bounds ar
 "ok", and the top-level ``t_slip_low`` / ``t_slip_high`` are the model's onset bracket (the
 running max's stay under ``running_max``, compared there). Issue 20's compiled tracker moved
 the tracked positions by <= 3e-7 px: the numbers computed from them are compared to a stated
-tolerance (:data:`TRACKED_OUTPUTS`); its new edge step is off here (:data:`NO_EDGE_STEP`).
+tolerance (:data:`TRACKED_OUTPUTS`).
 """
 from __future__ import annotations
 
@@ -45,15 +45,6 @@ TRACKED_OUTPUTS = ("stdout of measure-tracks", "stdout of measure-summary", "std
                    "stdout of measure-random", "demo/measurement/", "track/", "mt/", "ms/",
                    "mr/")
 TRACKED_JSON_REL = 1e-4
-#: Issue 20 also ended the default tracker with a least-squares step of an edge model
-#: (measurement.imaging.edge_step): it moves positions by ~0.01 px (20-30 % less RMS error,
-#: measured in tests/test_tracking.py; the end-to-end tests check the intervals it gives). To
-#: keep everything else pinned, this tree runs here with that step off: its NumPy path (the
-#: same results as the compiled kernel to 1e-12 px, tests/test_tracking_kernels.py) with the
-#: step replaced by "no move".
-NO_EDGE_STEP = ("from measurement.imaging import track_passes, window_fits; "
-                "track_passes._trackc = None; "
-                "window_fits.edge_step = lambda H, a, b, r, C, s: (a, b); ")
 TRACKED_PX = 1e-6
 TRUTH_RENAMED = {"centre_x_px": "x_center_px", "centre_y_px": "y_center_px",
                  "cd_x_px": "x_cd_px", "cd_y_px": "y_cd_px", "ball_x_px": "x_ball_px",
@@ -80,8 +71,7 @@ def _run(tree: Path | None, cwd: Path, *args: str) -> str:
     """``abu ARGS`` of the tree ``tree`` (None: this checkout); its stdout."""
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONHASHSEED="0")
     if tree is None:
-        code = (NO_EDGE_STEP + "import sys; from abu.cli.main import main; "
-                "sys.exit(main(sys.argv[1:]))")
+        code = "import sys; from abu.cli.main import main; sys.exit(main(sys.argv[1:]))"
         env["PYTHONPATH"] = str(ROOT)
     else:
         code = "import sys; from harness.cli import main; sys.exit(main(sys.argv[1:]))"

@@ -18,6 +18,7 @@ from twin.render import CameraGeometry, MarkerStyle, RenderSettings, render_fram
 
 TOL_PX = 1e-9
 KERNEL = P._trackc
+STEP = TrackingOptions(edge_step=True)  # the kernels' every branch: the optional edge step too
 
 
 def test_the_kernel_is_built():
@@ -74,8 +75,9 @@ class TestSamePositions:
 
     @pytest.mark.parametrize("kw", [{}, {"window": 21}, {"window": 36},
                                     {"options": TrackingOptions(smooth=False)},
-                                    {"options": TrackingOptions(edge_step=False)},
-                                    {"options": TrackingOptions(edge_width_px=0.1)},
+                                    {"options": TrackingOptions(edge_step=True)},
+                                    {"options": TrackingOptions(edge_step=True,
+                                                                edge_width_px=0.1)},
                                     {"options": TrackingOptions(min_snr=30.0)}])
     def test_rotating_recording(self, monkeypatch, kw):
         frames, seeds, _ = rotating()
@@ -87,7 +89,7 @@ class TestSamePositions:
         frames, seeds, _ = rotating(n=120, seed=3, gradient=0.5, background=200.0,
                                     centre=MarkerStyle(6.0, 60.0), cd=MarkerStyle(4.5, 70.0),
                                     ball=MarkerStyle(5.0, 50.0))
-        fast, slow = both_paths(monkeypatch, frames, seeds, dark=True)
+        fast, slow = both_paths(monkeypatch, frames, seeds, dark=True, options=STEP)
         assert_same(fast, slow)
         assert not fast.lost.any()
 
@@ -96,7 +98,7 @@ class TestSamePositions:
         frames[40] = 60                                 # all markers gone: low contrast
         frames[80] = np.roll(frames[80], 9, axis=1)     # a jump
         frames[120, 118:134, 118:134] = 230             # a bright patch beside the centre
-        fast, slow = both_paths(monkeypatch, frames, seeds)
+        fast, slow = both_paths(monkeypatch, frames, seeds, options=STEP)
         assert_same(fast, slow)
         assert len(set(fast.reason.ravel().tolist())) >= 3, fast.lost_summary()
 

@@ -1,5 +1,6 @@
-"""One Gauss-Newton step of an edge model on the marker's disk (the last step of the
-``isocontour`` method, :mod:`measurement.imaging.window_fits`).
+"""One Gauss-Newton step of an edge model on the marker's disk (the optional last step of the
+``isocontour`` method, :mod:`measurement.imaging.window_fits`: ``TrackingOptions(edge_step=True)``,
+``abu measure --edge-step``).
 
 The contour fit uses ~30-60 interpolated points on one level of a smoothed window; it leaves
 0.010-0.012 px RMS at noise 3 on the rendered recordings, 1.3-1.4 x the Cramer-Rao bound of the

@@ -387,7 +387,7 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
                   window: int = T.DEFAULT_WINDOW, dark: bool = False, progress: bool = False,
                   ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD,
-                  edge_step: bool = True) -> "T.Tracks":
+                  edge_step: bool = False) -> "T.Tracks":
     """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
     = 1 (the default), :func:`track_with_reflections` for 2; ``edge_step`` as
     :class:`tracking.TrackingOptions`."""
