@@ -57,6 +57,8 @@ class TrackingSettings:
         ball_reflections: 1, or 2 for the report's two-spot lighting.
         ball_method: with two reflections, ``outline`` or ``pair``.
         progress: progress bar on stderr while tracking.
+        edge_step: end the ``isocontour`` method with its edge-model step
+            (:mod:`measurement.imaging.edge_step`).
     """
 
     seeds_px: np.ndarray | None = None
@@ -66,6 +68,7 @@ class TrackingSettings:
     ball_reflections: int = 1
     ball_method: str = "outline"
     progress: bool = False
+    edge_step: bool = False
 
 
 @dataclass
@@ -229,7 +232,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     tracks = track_markers(frames, seeds, method=settings.method, window=settings.window_px,
                            dark=settings.dark_markers, progress=settings.progress,
                            ball_reflections=settings.ball_reflections,
-                           ball_method=settings.ball_method)
+                           ball_method=settings.ball_method, edge_step=settings.edge_step)
     lost = np.asarray(tracks.lost, dtype=bool)
     try:
         x = tracks_io.fill_lost(time, tracks.x, lost)
@@ -242,6 +245,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
             "roles": list(ROLES), "method": tracks.method, "window_px": tracks.window,
+            "edge_step": bool(tracks.options.edge_step),
             **_rate_info(rec, rate), "frames": int(time.size),
             "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
             "lost_reasons": tracks.lost_summary(),

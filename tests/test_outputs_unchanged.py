@@ -9,7 +9,9 @@ takes tracks.csv's ``x_center_px``), ``format_version`` beside ``kind`` in every
 (old ``version``), and ``abu table41 --json`` as an object with ``kind`` and ``units``; and
 issue 18's honesty changes: the running max's ``status`` says what its bounds are instead of
 "ok", and the top-level ``t_slip_low`` / ``t_slip_high`` are the model's onset bracket (the
-running max's stay under ``running_max``, compared there).
+running max's stay under ``running_max``, compared there). Issue 20's compiled tracker moved
+the tracked positions by <= 3e-7 px: the numbers computed from them are compared to a stated
+tolerance (:data:`TRACKED_OUTPUTS`).
 """
 from __future__ import annotations
 
@@ -32,6 +34,18 @@ BEFORE = "e8e7c928c8c3dcc9bddc6d3abcd7c80941a04ec9"
 #: Fields that hold a path, a wall time or a build's identity (they differ between any runs).
 VOLATILE = {"source", "file", "fmu_dir", "wall_time_s", "elapsed_s", "guid", "generated",
             "generationDateAndTime"}
+#: Issue 20: the isocontour refinement went from float32 NumPy to float64 (NumPy and the C
+#: kernel, which agree to 1e-12 px): tracked positions moved by <= 3e-7 px (measured: 2.3e-7 px
+#: on the bench recording), so every number computed from them moved in its last digits. In
+#: the outputs of the commands that track frames (stdout names, or output folders) numbers are
+#: compared to these tolerances: positions [px] (CSV columns ``*_px``) 1e-6 px; every other
+#: number relative 1e-4 (largest change seen 2.4e-5: the tracking-noise estimates, which are
+#: differences of positions, and omega_dot, their second derivative; the mu bounds 2e-7).
+TRACKED_OUTPUTS = ("stdout of measure-tracks", "stdout of measure-summary", "stdout of next",
+                   "stdout of measure-random", "demo/measurement/", "track/", "mt/", "ms/",
+                   "mr/")
+TRACKED_JSON_REL = 1e-4
+TRACKED_PX = 1e-6
 TRUTH_RENAMED = {"centre_x_px": "x_center_px", "centre_y_px": "y_center_px",
                  "cd_x_px": "x_cd_px", "cd_y_px": "y_cd_px", "ball_x_px": "x_ball_px",
                  "ball_y_px": "y_ball_px", "ball_apparent_x_px": "x_ball_apparent_px",
@@ -123,6 +137,10 @@ def _comparable(obj, path=""):
     return obj
 
 
+def _tracked(where: str) -> bool:
+    return where.startswith(TRACKED_OUTPUTS)
+
+
 def _differences(old, new, where: str) -> list[str]:
     """Every field of ``old`` that ``new`` lacks or holds differently (new may add fields)."""
     if isinstance(old, dict) and isinstance(new, dict):
@@ -136,7 +154,39 @@ def _differences(old, new, where: str) -> list[str]:
     if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
         return [d for i, (a, b) in enumerate(zip(old, new))
                 for d in _differences(a, b, f"{where}[{i}]")]
+    if (isinstance(old, float) and isinstance(new, float) and _tracked(where)
+            and math.isclose(old, new, rel_tol=TRACKED_JSON_REL, abs_tol=1e-12)):
+        return []  # issue 20: computed from positions moved by <= 3e-7 px
     return [] if old == new else [f"{where}: {old!r} -> {new!r}"[:300]]
+
+
+def _csv_cells_close(header: list[str], old: list[list[str]], new: list[list[str]]) -> bool:
+    """Same rows; numeric cells within the issue-20 tolerances (:data:`TRACKED_OUTPUTS`):
+    positions (columns ``*_px``) within :data:`TRACKED_PX` px, other numbers within
+    :data:`TRACKED_JSON_REL` of their column's largest magnitude (a column's values near zero,
+    e.g. a bias changing sign, move as much as its large ones); text equal."""
+    if len(old) != len(new) or any(len(a) != len(b) for a, b in zip(old, new)):
+        return False
+
+    def number(cell: str) -> float | None:
+        try:
+            return float(cell)
+        except ValueError:
+            return None
+
+    scale = [max((abs(v) for row in old if (v := number(row[j])) is not None
+                  and math.isfinite(v)), default=0.0) for j in range(len(header))]
+    for row_old, row_new in zip(old, new):
+        for j, (a, b) in enumerate(zip(row_old, row_new)):
+            if a == b:
+                continue
+            fa, fb = number(a), number(b)
+            if fa is None or fb is None:
+                return False
+            tol = TRACKED_PX if header[j].endswith("_px") else TRACKED_JSON_REL * scale[j]
+            if not abs(fa - fb) <= tol:
+                return False
+    return True
 
 
 def _json_equal(old, new, where: str) -> None:
@@ -159,10 +209,13 @@ def _compare_files(old_dir: Path, new_dir: Path) -> list[str]:
             continue
         new = new_dir / rel
         assert new.exists(), f"{rel} is no longer written"
-        if old.suffix == ".csv":
+        if old.suffix == ".csv" and _tracked(rel.as_posix()):
+            (h_new, rows_new), (h_old, rows_old) = _read_csv(new), _read_csv(old)
+            assert h_new == h_old and _csv_cells_close(h_old, rows_old, rows_new), rel
+        elif old.suffix == ".csv":
             assert _read_csv(new) == _read_csv(old), rel
         else:
-            _json_equal(json.loads(old.read_text()), json.loads(new.read_text()), str(rel))
+            _json_equal(json.loads(old.read_text()), json.loads(new.read_text()), rel.as_posix())
         compared.append(str(rel))
     return compared
 

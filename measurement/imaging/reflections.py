@@ -386,14 +386,16 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
 
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
                   window: int = T.DEFAULT_WINDOW, dark: bool = False, progress: bool = False,
-                  ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD
-                  ) -> "T.Tracks":
+                  ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD,
+                  edge_step: bool = False) -> "T.Tracks":
     """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
-    = 1 (the default), :func:`track_with_reflections` for 2."""
+    = 1 (the default), :func:`track_with_reflections` for 2; ``edge_step`` as
+    :class:`tracking.TrackingOptions`."""
     if ball_reflections not in (1, 2):
         raise ParameterError("--ball-reflections", ball_reflections, "1 or 2")
+    opts = T.TrackingOptions(edge_step=bool(edge_step))
     if ball_reflections == 1:
         return T.track_recording(frames, seeds, method=method, window=window, dark=dark,
-                                 progress=progress)
+                                 progress=progress, options=opts)
     return track_with_reflections(frames, seeds, ball_method=ball_method, method=method,
-                                  window=window, dark=dark)
+                                  window=window, dark=dark, options=opts)

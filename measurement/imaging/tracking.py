@@ -3,22 +3,24 @@
 Coordinates follow OpenCV: x = column, y = row, pixel centres at integers, origin at the
 centre of the top-left pixel. All positions are in pixels [px].
 
-How it works (two passes, so that most of the work is vectorised over all frames):
+How it works (two passes, chunk by chunk of frames, :mod:`measurement.imaging.track_passes`):
 
 1. **Seeded pass** (sequential, cheap): for each frame and marker, a square window (default
    30x30 px) is put at the marker's position in the previous frame (plus the last frame-to-frame
-   displacement) and the centroid of ``(I - L)+`` is taken with ``cv2.moments``, L being the
-   midpoint of the window's darkest and brightest grey levels. This is the report's seeding
-   (appendix B).
-2. **Refinement** (vectorised over all windows, :mod:`measurement.imaging.window_fits`): a window is
-   put at the seeded-pass position of the *same* frame and the centre is measured again with the
-   chosen method:
+   displacement) and the centroid of ``(I - L)+`` is taken, L being the midpoint of the window's
+   darkest and brightest grey levels (as ``cv2.moments`` computes it). This is the report's
+   seeding (appendix B).
+2. **Refinement**: a window is put at the seeded-pass position of the *same* frame and the
+   centre is measured again with the chosen method (:mod:`measurement.imaging.window_fits`):
 
    * ``isocontour`` (default): subtract a plane fitted to the window's border ring (removes an
      additive lighting gradient), smooth with a 3x3 binomial kernel, take the 50 % iso-contour
      of the bilinear interpolation of the pixels (its vertices are the sub-pixel crossings of
      the level on the pixel grid's edges, as in marching squares), fit a circle algebraically
-     (Kasa), reject outlier points, fit again.
+     (Kasa), reject outlier points, fit again. Optionally (``TrackingOptions(edge_step=True)``,
+     ``--edge-step``) one least-squares (Gauss-Newton) step of a blurred-disk model on the
+     unsmoothed pixels near the edge then moves the centre (:mod:`measurement.imaging.edge_step`:
+     17-30 % less RMS error).
    * ``report``: the report's method (appendix B): several contour levels between percentage
      bounds of the window's min..max grey levels (no lighting correction), a circle fit to each
      contour, the centres averaged. MATLAB's ``contour`` interpolates linearly, so the contour
@@ -26,9 +28,18 @@ How it works (two passes, so that most of the work is vectorised over all frames
    * ``moments``: the seeded pass's centroid again, vectorised, in the re-centred window (the
      fast baseline), with the lost-marker tests below plus a compactness test.
 
-Speed (benchmarks/bench_tracking.py, 3072 frames of 256x256 px, 3 markers, one core): the
-default method runs at about 2.5-3x the camera's 4500 frames/s; measured accuracy is in
-docs/measurement-imaging.md.
+The seeded pass and the ``isocontour`` refinement run in compiled kernels
+(``measurement/imaging/_trackc.c``, built by ``pip install -e .``) one window at a time; without
+them the same arithmetic runs in OpenCV and NumPy (vectorised over the windows of a chunk),
+with the same results (tests/test_tracking_kernels.py: seeded pass identical, positions within
+1e-9 px).
+
+Speed (benchmarks/bench_tracking.py, 3072 frames of 256x256 px, 3 markers, one core, CPU
+time): the default method with the kernels runs at ~1.1x the speed of a plain ``cv2.moments``
+tracker without sub-pixel fit or lost-marker tests (~50,000 frames/s, ~11x the camera's 4500
+frames/s) at 0.0109 / 0.0123 / 0.0102 px RMS on the rendered staircase recording; with the edge
+step at ~0.8x (~37,000 frames/s) at 0.0077 / 0.0100 / 0.0083 px; the NumPy fallback at ~10,000
+frames/s (~5,000 with the edge step). Measured accuracy is in docs/measurement-imaging.md.
 
 A marker is flagged ``lost`` in a frame (and its coordinates set to NaN) when: the window leaves
 the image; the contrast is too low (below ``min_contrast`` grey levels or ``min_snr`` times the
@@ -46,6 +57,9 @@ import numpy as np
 from abu_model.errors import AbuError, ParameterError
 
 from measurement.imaging import window_fits as W
+from measurement.imaging.track_passes import (  # noqa: F401  (BATCH_FRAMES re-exported)
+    BATCH_FRAMES, NoBar, track_passes)
+from measurement.imaging.track_passes import seeded_moments as _seeded_moments  # noqa: F401
 from measurement.imaging.window_fits import (  # noqa: F401  (re-exported names)
     BAD_RADIUS, FIT_FAILED, JUMP, LOST_REASONS, LOW_CONTRAST, OK, OUTSIDE, TOUCHES_EDGE,
     TrackingOptions)
@@ -53,11 +67,6 @@ from measurement.imaging.window_fits import (  # noqa: F401  (re-exported names)
 METHODS = ("isocontour", "report", "moments")
 DEFAULT_METHOD = "isocontour"
 DEFAULT_WINDOW = 30
-
-#: Frames per vectorised batch (bounds memory: batch * markers * window^2 floats). 128 keeps a
-#: batch's windows in the CPU cache: the refinement of 3072 frames took ~115 ms of CPU against
-#: ~140 ms with 256 (same results; the batch only groups independent windows).
-BATCH_FRAMES = 128
 
 
 class TrackingError(AbuError):
@@ -135,140 +144,12 @@ def _check_inputs(frames: np.ndarray, seeds: np.ndarray, window: int, method: st
     return frames, seeds, window
 
 
-# --------------------------------------------------------------------------------------------
-# pass 1: seeded moments (sequential)
-
-
-def _seeded_moments(frames: np.ndarray, seeds: np.ndarray, window: int, dark: bool,
-                    opts: TrackingOptions, bar=None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sequential moments tracker. Returns x, y (N, M) [px] and reason (N, M) codes.
-
-    Where lost, x and y hold the predicted position (used to seed the next frame).
-    """
-    import cv2
-
-    n, hgt, wid = frames.shape
-    m_count = seeds.shape[0]
-    half = window // 2
-    max_jump = opts.max_jump if opts.max_jump is not None else window / 3.0
-    xs = np.empty((n, m_count))
-    ys = np.empty((n, m_count))
-    reason = np.zeros((n, m_count), dtype=np.uint8)
-    # State per marker: last good position and its velocity [px/frame].
-    px = [float(s[0]) for s in seeds]
-    py = [float(s[1]) for s in seeds]
-    vx = [0.0] * m_count
-    vy = [0.0] * m_count
-    minmax = cv2.minMaxLoc
-    subtract = cv2.subtract
-    moments = cv2.moments
-    bar = bar or _NoBar()
-    for start in range(0, n, BATCH_FRAMES):
-        chunk = np.asarray(frames[start:start + BATCH_FRAMES])
-        if dark:
-            chunk = 255 - chunk  # a dark marker becomes a bright one
-        for ci in range(chunk.shape[0]):
-            frame = chunk[ci]
-            k = start + ci
-            for m in range(m_count):
-                qx = px[m] + vx[m]
-                qy = py[m] + vy[m]
-                x0 = int(round(qx)) - half
-                y0 = int(round(qy)) - half
-                code = OK
-                if x0 < 0 or y0 < 0 or x0 + window > wid or y0 + window > hgt:
-                    code = OUTSIDE
-                else:
-                    win = frame[y0:y0 + window, x0:x0 + window]
-                    lo, hi, _, _ = minmax(win)
-                    if hi - lo < opts.min_contrast:
-                        code = LOW_CONTRAST
-                    else:
-                        mom = moments(subtract(win, (lo + hi) * 0.5))
-                        m00 = mom["m00"]
-                        if m00 <= 0.0:
-                            code = LOW_CONTRAST
-                        else:
-                            cx = x0 + mom["m10"] / m00
-                            cy = y0 + mom["m01"] / m00
-                            # against the last good position, not the prediction: one
-                            # disturbed frame must not make the next good one look like a jump
-                            if (cx - px[m]) ** 2 + (cy - py[m]) ** 2 > max_jump * max_jump:
-                                code = JUMP
-                if code == OK:
-                    xs[k, m] = cx
-                    ys[k, m] = cy
-                    vx[m] = cx - px[m]
-                    vy[m] = cy - py[m]
-                    px[m] = cx
-                    py[m] = cy
-                else:
-                    xs[k, m] = px[m]
-                    ys[k, m] = py[m]
-                    vx[m] = 0.0
-                    vy[m] = 0.0
-                    reason[k, m] = code
-        bar.update(chunk.shape[0])
-    return xs, ys, reason
-
-
-class _NoBar:
-    def update(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
 def _progress_bar(total: int, enabled: bool, desc: str):
     if not enabled:
-        return _NoBar()
+        return NoBar()
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="frame")
-
-
-# --------------------------------------------------------------------------------------------
-# pass 2: vectorised refinement
-
-
-def _refine(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, reason0: np.ndarray,
-            window: int, dark: bool, method: str, opts: TrackingOptions, bar=None
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Measure every window again with ``method``, centred on the seeded-pass positions."""
-    n, hgt, wid = frames.shape
-    m_count = cx.shape[1]
-    half = window // 2
-    geo = W.WindowGeometry.make(window)
-    refine = W.REFINERS[method]
-    X = np.full((n, m_count), np.nan)
-    Y = np.full((n, m_count), np.nan)
-    R = np.full((n, m_count), np.nan)
-    reason = reason0.copy()
-    for start in range(0, n, BATCH_FRAMES):
-        stop = min(n, start + BATCH_FRAMES)
-        chunk = np.asarray(frames[start:stop])
-        fi, mi = np.divmod(np.arange((stop - start) * m_count), m_count)
-        x0 = np.rint(cx[start:stop].ravel()).astype(np.int64) - half
-        y0 = np.rint(cy[start:stop].ravel()).astype(np.int64) - half
-        inside = (x0 >= 0) & (y0 >= 0) & (x0 + window <= wid) & (y0 + window <= hgt)
-        x0c = np.clip(x0, 0, wid - window)
-        y0c = np.clip(y0, 0, hgt - window)
-        G = W.gather(chunk, fi, x0c, y0c, window).astype(np.float32)
-        if dark:
-            G = 255.0 - G
-        a, b, r, code = refine(G, geo, opts)
-        code[~inside] = OUTSIDE
-        prev = reason[start:stop].ravel()
-        code = np.where(code != OK, code, prev)  # a lost seeded pass stays lost
-        X[start:stop] = (x0c + a).reshape(-1, m_count)
-        Y[start:stop] = (y0c + b).reshape(-1, m_count)
-        R[start:stop] = r.reshape(-1, m_count)
-        reason[start:stop] = code.reshape(-1, m_count)
-        if bar is not None:
-            bar.update(stop - start)
-    return X, Y, R, reason
 
 
 # --------------------------------------------------------------------------------------------
@@ -330,8 +211,7 @@ def track_recording(frames: np.ndarray, seeds: np.ndarray, *, method: str = DEFA
     opts = options or TrackingOptions()
     bar = _progress_bar(2 * frames.shape[0], progress, f"tracking ({method}, 2 passes)")
     try:
-        xs, ys, reason = _seeded_moments(frames, seeds, window, dark, opts, bar)
-        X, Y, R, reason = _refine(frames, xs, ys, reason, window, dark, method, opts, bar)
+        X, Y, R, reason = track_passes(frames, seeds, window, dark, method, opts, bar)
     finally:
         bar.close()
     _post_checks(X, Y, R, reason, window, opts, check_radius=True)
