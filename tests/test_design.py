@@ -16,7 +16,8 @@ import pytest
 
 from controller.drive import Drive
 from abu.cli.main import main
-from harness.planning.design import REPORT_INTERVALS, DesignSpec, check_design, design_staircase, predict
+from harness.planning.design import REPORT_INTERVALS, DesignSpec, design_staircase, predict
+from harness.planning.design_check import check_design
 
 REPORT_MU = 2.75e-3
 CASES = [
