@@ -183,6 +183,16 @@ def report(rows: list[dict], label: str) -> None:
               f"within [{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band_cam.mean():.1f} %")
         print(f"  median measured width {100 * np.median(w):.1f} % (report's run 8.7 %), "
               f"predicted median {100 * np.median([r['pred']['expected'] for r in fin]):.1f} %")
+        parts = np.array([[(r["profile_mu_high"] - r["profile_mu_low"]) / r["mu"],
+                           2 * (r["pred"]["lens"] or 0.0),
+                           2 * max(r["kinematic_rel_bias_at_slip"] - (r["pred"]["lens"] or 0.0),
+                                   0.0),
+                           (r["lower_bound_sup_z"] + 1.96) * r["kinematic_rel_sigma_at_slip"]]
+                          for r in fin])
+        med = 100 * np.median(parts, axis=0)
+        print(f"  what sets it (medians of abu measure's parts, relative to mu): beta profile "
+              f"{med[0]:.1f} %, lens prior 2 A (lever/mu + 2) {med[1]:.1f} %, truncation bound "
+              f"x 2 {med[2]:.1f} %, kinematic noise (z_lo + z) sigma {med[3]:.1f} %")
 
 
 def calibrate(rows: list[dict]) -> None:
