@@ -126,18 +126,23 @@ RENDERED = [(2000, (0.02, 0.04), "PI 5 ms"), (2001, (0.01, 0.02), "PI 25 ms b 0.
 
 def test_rendered_designed_runs_measure_the_predicted_width():
     """Three designed runs rendered with the harsh twin's lighting and lens and measured by
-    ``abu measure``: every bound finite, mu covered, measured / predicted width in the
-    benchmark's band [0.77, 1.3] and inside the predicted 90 % range."""
+    ``abu measure``: every bound finite, mu covered, the measured width inside the predicted
+    90 % range (96 % of the benchmark's validation runs are) and measured / predicted width in
+    the benchmark's band [0.77, 1.3] (68 % of them are; these three are, seeds fixed before
+    they were run)."""
     bench = _bench()
+    ratios = []
     for seed, mu_range, drive in RENDERED:
         design = bench.run_design(mu_range, drive, [])
         row = bench.one((seed, mu_range, drive, design))
         assert row["exit"] == 0 and bench.finite(row), row
         assert bench.covered(row), row
         pred = bench.predicted(row, design)
-        ratio = row["relative_width"] / pred["expected"]
+        ratios.append(row["relative_width"] / pred["expected"])
         print(f"\n[width] seed {seed} {drive} {mu_range}: mu {row['mu']:.4g}, measured "
               f"{100 * row['relative_width']:.1f} %, predicted {100 * pred['expected']:.1f} % "
-              f"(90 %: {100 * pred['low90']:.1f}-{100 * pred['high90']:.1f} %), ratio {ratio:.3f}")
-        assert bench.RATIO_BAND[0] <= ratio <= bench.RATIO_BAND[1], (seed, ratio)
+              f"(90 %: {100 * pred['low90']:.1f}-{100 * pred['high90']:.1f} %), ratio "
+              f"{ratios[-1]:.3f}")
         assert pred["low90"] <= row["relative_width"] <= pred["high90"], (seed, pred)
+        assert bench.RATIO_BAND[0] <= ratios[-1] <= bench.RATIO_BAND[1], (seed, ratios[-1])
+    assert bench.RATIO_BAND[0] <= float(np.median(ratios)) <= bench.RATIO_BAND[1], ratios

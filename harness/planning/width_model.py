@@ -11,13 +11,11 @@ docs/measurement-analysis.md), each part computed from the plan:
   slip speed obeys u' = [omega^2 (q - mu_d) - mu_d |omega| (1 + lever) u] / 1.4 (q = mu_req,
   the ball re-sticks where u returns to 0); its deviation D(tau) = int u grows as tau^3 when
   mu_d = mu (q - mu grows linearly) and as tau^2 when mu_d < mu. The data tell a slip from
-  noise once D reaches ``k_emerge`` sigma_beta. An upper candidate mu'' slips later, at the
-  time the measured q's running max crosses it: it is excluded once the true deviation has
-  reached the threshold before it slips. A lower candidate mu' slips earlier; with its mu_d
-  profiled the slowest is mu_d = mu', which is excluded when its own deviation by the true
-  onset has reached the threshold. The measured q is the Savitzky-Golay view of the plan
-  (window and degree of ``abu measure``'s default estimator), so a staircase's steps are seen
-  smoothed, as the measurement sees them.
+  noise once D reaches ``k_emerge`` sigma_beta, at tau; the onset is located to +- tau and the
+  profile spans the running max of the measured q over [t_s - tau, t_s + tau]. The measured q
+  is the Savitzky-Golay view of the plan (window and degree of ``abu measure``'s default
+  estimator), so a staircase's steps are seen smoothed, as the measurement sees them. (The fit
+  uses the whole slip, so ``k_emerge`` comes out well below 1.)
 * **the kinematic noise at the slip**: the SG derivative filters' noise gains times theta's
   tracking noise, relative to omega_dot and omega at the slip; z sigma on the upper bound, the
   Rice sup quantile (about 3) on the lower one.
@@ -27,10 +25,10 @@ docs/measurement-analysis.md), each part computed from the plan:
   2 A (lever / mu + 2) whatever the speed: a floor of the uncalibrated camera.
 
 Free constants (:class:`WidthConstants`), calibrated on rendered designed runs
-(``benchmarks/bench_designed_runs.py``; the seeds and the fit are in docs/design.md): the
-emergence threshold ``k_emerge``, beta's and theta's noise, and the spread of measured /
-predicted (log-normal) that sets the 90 % range together with the unknown mu_d / mu in
-[0.6, 1]. Constants of ``abu measure`` duplicated here (harness does not import measurement):
+(``benchmarks/bench_designed_runs.py --calibrate``; the seeds and the fit are in
+docs/design.md): the emergence threshold ``k_emerge``, beta's and theta's noise, the lower
+bound's quantile and the factors of the 90 % range around the widths at mu_d / mu in [0.6, 1]
+(the measurement does not know mu_d). Constants of ``abu measure`` duplicated here (harness does not import measurement):
 the SG window 42 ms and degree 9, the lens prior 8e-4 rad, the confidence 95 %.
 """
 from __future__ import annotations
