@@ -146,3 +146,28 @@ def test_rendered_designed_runs_measure_the_predicted_width():
         assert pred["low90"] <= row["relative_width"] <= pred["high90"], (seed, pred)
         assert bench.RATIO_BAND[0] <= ratios[-1] <= bench.RATIO_BAND[1], (seed, ratios[-1])
     assert bench.RATIO_BAND[0] <= float(np.median(ratios)) <= bench.RATIO_BAND[1], ratios
+
+
+def test_noise_from_sets_the_camera_noise_and_bad_files_are_refused(tmp_path, capsys):
+    """--noise-from: a noisier camera (theta and beta noise x 3) predicts a wider interval;
+    a missing or foreign file is one line naming the option, exit 2."""
+    def summary(scale):
+        return {"kind": "abu-measure-summary", "noise": {"sigma_theta_rad": 2.14e-4 * scale},
+                "model_fit": {"noise_model": {"sigma_white_rad": 5e-4 * scale,
+                                              "sigma_leftover_rad": 4e-4 * scale}}}
+    widths = []
+    for scale in (1.0, 3.0):
+        path = tmp_path / f"s{scale}.json"
+        path.write_text(json.dumps(summary(scale)))
+        assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--json",
+                     "--noise-from", str(path)]) == 0
+        w = json.loads(capsys.readouterr().out)["width_prediction"]
+        assert w["camera_noise"]["sigma_theta_rad"] == pytest.approx(2.14e-4 * scale)
+        widths.append(w["expected"])
+    assert widths[1] > 1.2 * widths[0]
+    (tmp_path / "other.json").write_text(json.dumps({"kind": "abu-design"}))
+    for bad in (tmp_path / "missing.json", tmp_path / "other.json"):
+        assert main(["design", "--mu-range", "0.02", "0.04", "--no-check",
+                     "--noise-from", str(bad)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--noise-from" in err[0], err
