@@ -11,16 +11,24 @@ lag and setpoint weight), renders the recording of the design's length and measu
 * measured / predicted relative width (``relative_width`` of ``abu measure``, (hi - lo) / mid,
   against ``harness.planning.width_model``'s expected width at the true mu and at mu_d / mu = 0.8)
   and the share within [0.77, 1.3] (target >= 90 %), the share inside the predicted 90 % range;
+* the same ratio with the camera's noise known (this run's measured theta and beta noise, what
+  an earlier recording of the same set-up states: ``--noise-from``, ``abu next``);
 * the share of runs with both bounds finite (target: all), coverage of the stated 95 %
-  (target >= 95 %), the median measured width (the report's single run: 8.7 %).
+  (target >= 95 %), the median measured width (the report's single run: 8.7 %), and what sets
+  it: the medians of ``abu measure``'s own parts (beta profile, lens prior, truncation bound,
+  kinematic noise).
 
-The width model's constants were calibrated on the seeds of ``--calibration`` (first 0);
-the validation slice (first 1000) was not used for it. Run (two worker processes)::
+The width model's constants were calibrated on seeds 0-71 (``--calibrate ROWS`` on the rows of
+a run with ``--first 0``, whose designs came from the noise-free ranking of the code before the
+width model); the validation slice, seeds 1000-1071 with the designs of the predicted ranking,
+was not used for it. Run (two worker processes, about 30 min on the shared 2-core machine)::
 
-    nice python benchmarks/bench_designed_runs.py --runs 66 --first 1000 --jobs 2
-    nice python benchmarks/bench_designed_runs.py --runs 66 --first 0 --jobs 2   # calibration
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --jobs 2
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 0 --jobs 2 --rows cal.jsonl
+    python benchmarks/bench_designed_runs.py --calibrate cal.jsonl   # fit the constants
+    python benchmarks/bench_designed_runs.py --report cal.jsonl      # figures of saved rows
 
-``--rows FILE`` also writes one JSON row per run (what the calibration reads).
+``--rows FILE`` writes one JSON row per run (what ``--calibrate`` and ``--report`` read).
 """
 from __future__ import annotations
 
@@ -241,7 +249,7 @@ def calibrate(rows: list[dict]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=1000, help="first seed")
-    ap.add_argument("--runs", type=int, default=66, help="rendered runs in all")
+    ap.add_argument("--runs", type=int, default=72, help="rendered runs in all")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--rows", default=None, help="write the rows as JSON lines here")
     ap.add_argument("--design-args", default="", help="extra options of abu design")
