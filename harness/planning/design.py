@@ -218,6 +218,7 @@ class Design:
         d = self.spec.drive
         return ["--omega0-hz", f"{self.omega0_hz:d}", "--omega-end-hz", f"{self.omega_end_hz:g}",
                 "--t0", f"{self.t0_s:.6g}", "--te", f"{self.te_s:.6g}",
+                "--rounding", self.rounding, "--step-hz", f"{self.spec.step_hz:g}",
                 "--frames", f"{self.spec.frames:d}", "--fps", f"{self.spec.fps:g}",
                 "--zeta", f"{d.zeta:.9g}", "--omega-n", f"{d.omega_n:.9g}",
                 "--tau-motor", f"{d.tau_motor:.9g}"]
