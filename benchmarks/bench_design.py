@@ -21,7 +21,8 @@ import time
 from abu_model.params import PlantParams
 from controller.drive import Drive
 from fmus.build import build_fmus
-from harness.planning.design import DesignSpec, check_design, design_staircase
+from harness.planning.design import DesignSpec, design_staircase
+from harness.planning.design_check import check_design
 from harness.experiments.staircase import StaircaseExperiment, run_staircase
 
 HZ = 2.0 * math.pi

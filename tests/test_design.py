@@ -16,7 +16,8 @@ import pytest
 
 from controller.drive import Drive
 from abu.cli.main import main
-from harness.planning.design import REPORT_INTERVALS, DesignSpec, check_design, design_staircase, predict
+from harness.planning.design import REPORT_INTERVALS, DesignSpec, design_staircase, predict
+from harness.planning.design_check import check_design
 
 REPORT_MU = 2.75e-3
 CASES = [
@@ -103,3 +104,22 @@ def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
     for corner in (corners[0], corners[-1]):  # all low, all high
         rows = check_design(replace(design, spec=replace(spec, drive=corner)), None, fmu_dir)
         assert all(r["first_step_stuck"] and r["slip_inside"] and r["brackets"] for r in rows)
+
+
+def test_render_args_render_the_designed_staircase():
+    """``render_args`` carry the rounding and the step: ``abu render`` given them films the
+    designed staircase, not the report's lead rounding at 1 Hz."""
+    from abu.cli.main import build_parser
+    from abu.cli.render import _twin_settings
+
+    for spec in (DesignSpec(0.02, 0.04, step_hz=2.0),
+                 DesignSpec(0.02, 0.04, drive=Drive("pi-lag", 0.7, 12.0, 0.005))):
+        design = design_staircase(spec)
+        args = build_parser().parse_args(["render", "--out", "x", *design.render_args(),
+                                          "--mu", "0.03"])
+        s = _twin_settings(args)
+        stair = design.staircase
+        assert s.drive.rounding == design.rounding
+        assert s.drive.step == pytest.approx(stair.step)
+        assert (s.omega0, s.omega_end, s.t0, s.te) == pytest.approx(
+            (stair.omega0, stair.omega_end, stair.t0, stair.te), rel=1e-5)

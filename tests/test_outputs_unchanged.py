@@ -9,9 +9,10 @@ takes tracks.csv's ``x_center_px``), ``format_version`` beside ``kind`` in every
 (old ``version``), and ``abu table41 --json`` as an object with ``kind`` and ``units``; and
 issue 18's honesty changes: the running max's ``status`` says what its bounds are instead of
 "ok", and the top-level ``t_slip_low`` / ``t_slip_high`` are the model's onset bracket (the
-running max's stay under ``running_max``, compared there). Issue 20's compiled tracker moved
-the tracked positions by <= 3e-7 px: the numbers computed from them are compared to a stated
-tolerance (:data:`TRACKED_OUTPUTS`).
+running max's stay under ``running_max``, compared there); ``abu design`` / ``abu next`` rank
+their candidates by the predicted measured width (:data:`DESIGN_CHOSEN`). Issue 20's compiled
+tracker moved the tracked positions by <= 3e-7 px: the numbers computed from them are compared
+to a stated tolerance (:data:`TRACKED_OUTPUTS`).
 """
 from __future__ import annotations
 
@@ -103,6 +104,17 @@ def _commands(tmp: Path) -> list[tuple[str, list[str]]]:
     ]
 
 
+#: Fields of ``abu design`` / ``abu next`` that depend on the chosen staircase (issue 18 item
+#: 3): the search now ranks its candidates by the width ``abu measure`` is predicted to report
+#: (default objective ``predicted``, was the noise-free ``expected``), so another staircase may
+#: win; the range, drive, camera limits and the report's widths are still compared.
+DESIGN_CHOSEN = {"omega0_hz", "omega_end_hz", "t0_s", "te_s", "rounding", "simulate_args",
+                 "render_args", "first_step_max_mu_req", "drive_ci_corners_hold", "objective",
+                 "expected_relative_width", "worst_relative_width", "median_relative_width",
+                 "table", "check", "predicted_worst_combined_width",
+                 "predicted_median_combined_width", "predicted_combined"}
+
+
 def _upgrade(obj):
     """The old output with the format changes the issue asked for."""
     if isinstance(obj, list) and obj and isinstance(obj[0], dict) and "omega0_hz" in obj[0]:
@@ -111,6 +123,9 @@ def _upgrade(obj):
         out = {k: _upgrade(v) for k, v in obj.items()}
         if "version" in out and "kind" in out:
             out["format_version"] = out.pop("version")
+        if out.get("kind") in ("abu-design", "abu-next"):
+            for key in DESIGN_CHOSEN:
+                out.pop(key, None)
         rm = out.get("running_max")
         if isinstance(rm, dict) and "t_slip_low" in out:   # a measure summary (issue 18)
             out.pop("t_slip_low")

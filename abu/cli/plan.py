@@ -146,7 +146,9 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
              "report's setup has 1 Hz")
     try:
         return DesignSpec(
-            lo, hi, ball=BallParams(l=positive("--l", args.l, "m"), d=positive("--d", args.d, "m")),
+            width=_width_constants(args.noise_from or [], getattr(args, "summaries", None)),
+            mu_lo=lo, mu_hi=hi,
+            ball=BallParams(l=positive("--l", args.l, "m"), d=positive("--d", args.d, "m")),
             fps=args.fps, frames=args.frames,
             speed_min_hz=positive("--speed-min-hz", args.speed_min_hz, "Hz"),
             speed_max_hz=positive("--speed-max-hz", args.speed_max_hz, "Hz"),
@@ -158,6 +160,30 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
         option = {"speed_max_hz": "--speed-max-hz", "edge_s": "--edge-s", "mu_lo": "--mu-range",
                   "mu_hi": "--mu-range"}.get(exc.parameter)
         raise exc if option is None else ParameterError(option, exc.value, exc.expected) from None
+
+
+def _width_constants(noise_from: list[str], summaries: list[str] | None):
+    """The width model's constants with the camera's noise of ``--noise-from`` (else, for
+    ``abu next``, of the summaries it combines; else the calibrated defaults)."""
+    from harness.planning.width_model import CALIBRATED, with_camera_noise
+
+    paths = noise_from or [p for p in summaries or [] if Path(p).suffix.lower() == ".json"]
+    found = []
+    for p in paths:
+        try:
+            obj = json.loads(Path(p).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ParameterError("--noise-from" if noise_from else "summaries", p,
+                                 f"a readable abu measure summary.json ({exc})") from None
+        if not isinstance(obj, dict):
+            raise ParameterError("--noise-from" if noise_from else "summaries", p,
+                                 "a JSON object (abu measure summary.json)")
+        if obj.get("kind") == "abu-measure-summary":
+            found.append(obj)
+        elif noise_from:
+            raise ParameterError("--noise-from", p, "an abu measure summary.json (kind "
+                                 f"abu-measure-summary, not {obj.get('kind')!r})")
+    return with_camera_noise(CALIBRATED, found)
 
 
 def _g(value: float | None, digits: int = 5) -> str:
@@ -182,12 +208,13 @@ def _describe_design(design, check) -> str:
         lines.append(f"  {design.mu[k]:>10.4g} {design.t_slip_s[k]:>10.4f} "
                      f"{design.mu_low[k]:>11.4g} {design.mu_high[k]:>11.4g} "
                      f"{100 * design.relative_width[k]:>9.1f}")
-    lines.append(f"  predicted relative width: expected {100 * design.expected_width:.1f} %, "
+    lines.append(f"  noise-free relative width: expected {100 * design.expected_width:.1f} %, "
                  f"worst {100 * design.worst_width:.1f} % (objective {s.objective}; slip located "
                  "within "
                  f"+-{1e3 * s.slip_window_s:g} ms); the report: "
                  + ", ".join(f"{k} {100 * v:.1f} %"
                              for k, v in design.as_dict()["report_relative_widths"].items()))
+    lines += _describe_width(design)
     if check is not None:
         ok = all(r["first_step_stuck"] and r["slip_inside"] and r["brackets"] for r in check)
         lines.append("  co-simulation check (FMUs): " + "; ".join(
@@ -197,6 +224,28 @@ def _describe_design(design, check) -> str:
     lines.append("  abu simulate " + " ".join(design.simulate_args()) + " --mu MU")
     lines.append("  abu render " + " ".join(design.render_args()) + " --mu MU")
     return "\n".join(lines)
+
+
+def _pct(x: float | None) -> str:
+    return "null bound" if x is None else f"{100 * x:.1f} %"
+
+
+def _describe_width(design) -> list[str]:
+    """Lines of the predicted ``abu measure`` width (expected and 90 % range)."""
+    if design.width is None:
+        return []
+    w = design.as_dict()["width_prediction"]
+    rows = w["table"]
+    lines = [f"  predicted 'abu measure' width (hi - lo) / mid: expected {_pct(w['expected'])} "
+             f"(90 % range {_pct(w['low90'])} - {_pct(w['high90'])}), worst "
+             f"{_pct(w['worst_expected'])} over the range; at mu:"]
+    for k in range(0, len(rows), 6):
+        r = rows[k]
+        lines.append(f"    mu {r['mu']:.4g}: {_pct(r['expected'])} ({_pct(r['low90'])} - "
+                     f"{_pct(r['high90'])}; beta profile {_pct(r['profile'])}, lens prior "
+                     f"+-{_pct(r['lens'])}, kinematic noise {_pct(r['kinematic_noise'])} "
+                     "1 sigma)")
+    return lines
 
 
 def _write_design(args, payload: dict, design, check, name: str) -> None:
@@ -211,7 +260,8 @@ def _write_design(args, payload: dict, design, check, name: str) -> None:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from harness.planning.design import check_design, design_staircase
+    from harness.planning.design import design_staircase
+    from harness.planning.design_check import check_design
 
     lo, hi = (finite("--mu-range", v) for v in args.mu_range)
     design = design_staircase(_spec(args, lo, hi))
@@ -228,7 +278,7 @@ def cmd_design(args: argparse.Namespace) -> int:
 def cmd_next(args: argparse.Namespace) -> int:
     from controller.drive import drive_from_dict
 
-    from harness.planning.design import check_design
+    from harness.planning.design_check import check_design
     from abu.intervals_io import read_intervals
     from harness.planning.next_run import combine, propose_next
 
@@ -248,7 +298,11 @@ def cmd_next(args: argparse.Namespace) -> int:
     print(f"{len(intervals)} interval(s); combined [{lo:.5g}, {hi:.5g}] (width {hi - lo:.3g})")
     print(_describe_design(proposal.design, check))
     print(f"  predicted combined interval after this run: worst width "
-          f"{proposal.worst_combined_width:.3g} (now {hi - lo:.3g})")
+          f"{proposal.worst_combined_width:.3g} (now {hi - lo:.3g}), noise-free")
+    c = proposal.combined_relative_width()
+    print(f"  predicted combined relative width (hi - lo) / mid with 'abu measure' as predicted: "
+          f"expected {_pct(c['expected'])} (90 % range {_pct(c['low90'])} - {_pct(c['high90'])}); "
+          f"now {_pct((hi - lo) / (0.5 * (hi + lo)))}")
     return 0
 
 
@@ -272,9 +326,15 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--slip-window-s", type=float, default=0.004,
                    help="half-width of the time window in which a measurement locates the slip "
                         "[s] (default 0.004, as 'abu measure' on the twin)")
-    g.add_argument("--objective", choices=["expected", "worst"], default="expected",
-                   help="minimise the mean relative width over a log-uniform prior on the range "
-                        "(default) or the largest")
+    g.add_argument("--objective", choices=["predicted", "expected", "worst"],
+                   default="predicted",
+                   help="minimise the mean width 'abu measure' is predicted to report over a "
+                        "log-uniform prior on the range (default), or the noise-free mean or "
+                        "largest width")
+    g.add_argument("--noise-from", nargs="+", default=None, metavar="SUMMARY",
+                   help="abu measure summary.json of earlier recordings with this camera and "
+                        "lighting: their theta and beta noise set the predicted width (default: "
+                        "the calibrated typical camera; abu next uses the summaries it combines)")
     g.add_argument("--l", type=float, default=1.15e-2, help="radius of the ball centre's path [m]")
     g.add_argument("--d", type=float, default=3.0e-3, help="ball diameter [m]")
     g = p.add_argument_group("output")

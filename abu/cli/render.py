@@ -88,6 +88,10 @@ def _add_render_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"final speed [Hz] (default {d.omega_end / TWO_PI:g})")
     p.add_argument("--t0", type=float, default=d.t0, help="start of the staircase [s]")
     p.add_argument("--te", type=float, default=d.te, help="duration of the staircase [s]")
+    p.add_argument("--rounding", choices=["lead", "nearest", "trail"], default=d.drive.rounding,
+                   help=f"staircase rounding (default {d.drive.rounding}, the report's)")
+    p.add_argument("--step-hz", type=float, default=d.drive.step / TWO_PI,
+                   help=f"setpoint resolution [Hz] (default {d.drive.step / TWO_PI:g})")
     p.add_argument("--fps", type=float, default=d.fps, help="frame rate [frames/s]")
     p.add_argument("--frames", type=int, default=d.n_frames, help="number of frames")
     p.add_argument("--beta0", type=float, default=d.beta0, help="initial ball angle [rad]")
@@ -129,7 +133,10 @@ def _twin_settings(args: argparse.Namespace) -> TwinSettings:
     render = d.render.with_(noise_sigma=args.noise, gradient=args.gradient,
                             ball_shift_px=args.ball_shift_px,
                             exposure_fraction=args.exposure_fraction)
-    drive = replace(d.drive, zeta=args.zeta, omega_n=args.omega_n, tau_motor=args.tau_motor)
+    from abu.cli.common import positive
+    drive = replace(d.drive, zeta=args.zeta, omega_n=args.omega_n, tau_motor=args.tau_motor,
+                    rounding=args.rounding,
+                    step=positive("--step-hz", args.step_hz, "Hz") * TWO_PI)
     return d.with_(mu=args.mu, omega0=args.omega0_hz * TWO_PI,
                    omega_end=args.omega_end_hz * TWO_PI, t0=args.t0, te=args.te, fps=args.fps,
                    n_frames=args.frames, beta0=args.beta0, drive=drive, render=render,

@@ -17,9 +17,13 @@ evaluation of mu_req per candidate staircase gives, for every mu of the range at
 
 The search runs over the integer-Hz start speed (the setup's speed limits), the span
 (omega_end - omega0 in whole steps), te (a geometric grid) and the three roundings, vectorised
-over the start speeds, and keeps the design with the smallest worst-case relative width over a
-log-spaced grid of mu. Speeds are negative (the report's clockwise ABU) unless ``direction`` is
-+1. :func:`check_design` co-simulates the design on the FMUs.
+over the start speeds. With the default objective ``predicted`` the best 30 of that noise-free
+ranking and the best at each start speed are then ranked by the width ``abu measure`` is
+predicted to report (:mod:`.width_model`: the slip's emergence from beta's noise, the
+kinematic noise and truncation at the slip, the lens prior), mean over a log-spaced grid of mu;
+``expected`` / ``worst`` keep the noise-free mean / largest width. Speeds are negative (the
+report's clockwise ABU) unless ``direction`` is
++1. :func:`harness.planning.design_check.check_design` co-simulates the design on the FMUs.
 """
 from __future__ import annotations
 
@@ -35,6 +39,8 @@ from abu_model.params import BallParams, check_finite
 from controller.drive import MODEL_PARAMETERS, Drive
 from controller.reference import ROUNDINGS, Staircase
 
+from harness.planning.design_width import predict_staircase, score as width_score, summary
+from harness.planning.width_model import CALIBRATED, WidthConstants
 from harness.planning.loop_response import as_setpoints, drive_response
 
 HZ = 2.0 * math.pi
@@ -50,7 +56,10 @@ REPORT_INTERVALS = {"eq. 4.9 simulation (mu = 2.75e-3)": (2.63e-3, 4.14e-3),
 CHECK_COMM_STEP: float | None = None
 
 
-OBJECTIVES = ("expected", "worst")
+OBJECTIVES = ("predicted", "expected", "worst")
+#: Candidates of the noise-free ranking re-ranked by the predicted width (plus the best at each
+#: start speed, so that speed is searched) and the mu grid of that ranking.
+RERANK_TOP, RERANK_MUS = 30, 9
 
 
 class DesignError(ParameterError):
@@ -74,8 +83,11 @@ class DesignSpec:
         direction: -1 (clockwise, the report's) or +1.
         te_grid: candidate durations of the inclined sine [s].
         max_span_steps: largest staircase span in steps.
-        objective: ``expected`` (mean relative width over a log-uniform prior on the range,
-            the default) or ``worst`` (largest relative width over the range).
+        width: the width model's constants (:mod:`.width_model`; the camera's noise, e.g.
+            from earlier recordings with :func:`.width_model.with_camera_noise`).
+        objective: ``predicted`` (the default: mean width ``abu measure`` is predicted to
+            report, :mod:`.width_model`), ``expected`` (mean noise-free relative width over a
+            log-uniform prior on the range) or ``worst`` (its largest over the range).
     """
 
     mu_lo: float
@@ -93,7 +105,8 @@ class DesignSpec:
     direction: int = -1
     te_grid: tuple[float, ...] = tuple(float(x) for x in np.geomspace(0.15, 4.0, 13))
     max_span_steps: int = 30
-    objective: str = "expected"
+    objective: str = "predicted"
+    width: WidthConstants = CALIBRATED
 
     def __post_init__(self) -> None:
         lo, hi = check_finite("mu_lo", self.mu_lo), check_finite("mu_hi", self.mu_hi)
@@ -140,8 +153,10 @@ class Design:
         first_step_max_mu_req: largest mu_req before the second step [-].
         ci_corners_hold: whether the design also holds (first step stuck, slips inside the
             record) at every corner of the drive's 95 % intervals (None: no intervals).
-        score: the objective's value: mean (``expected``) or largest (``worst``) relative
-            width (mu_high - mu_low) / mu over the log-spaced mu grid [-].
+        score: the objective's value: mean predicted ``abu measure`` width (``predicted``),
+            mean (``expected``) or largest (``worst``) noise-free relative width
+            (mu_high - mu_low) / mu over the log-spaced mu grid [-].
+        width: the predicted ``abu measure`` width on the mu grid (:mod:`.width_model`).
     """
 
     spec: DesignSpec
@@ -157,6 +172,7 @@ class Design:
     first_step_max_mu_req: float
     score: float
     ci_corners_hold: bool | None = None
+    width: Any = None
 
     @property
     def staircase(self) -> Staircase:
@@ -202,6 +218,7 @@ class Design:
         d = self.spec.drive
         return ["--omega0-hz", f"{self.omega0_hz:d}", "--omega-end-hz", f"{self.omega_end_hz:g}",
                 "--t0", f"{self.t0_s:.6g}", "--te", f"{self.te_s:.6g}",
+                "--rounding", self.rounding, "--step-hz", f"{self.spec.step_hz:g}",
                 "--frames", f"{self.spec.frames:d}", "--fps", f"{self.spec.fps:g}",
                 "--zeta", f"{d.zeta:.9g}", "--omega-n", f"{d.omega_n:.9g}",
                 "--tau-motor", f"{d.tau_motor:.9g}"]
@@ -213,12 +230,14 @@ class Design:
             "omega0_hz": self.omega0_hz, "omega_end_hz": self.omega_end_hz, "t0_s": self.t0_s,
             "te_s": self.te_s, "rounding": self.rounding, "step_hz": s.step_hz,
             "simulate_args": self.simulate_args(), "render_args": self.render_args(),
-            "mu_range": [s.mu_lo, s.mu_hi], "record_s": s.record_s, "edge_s": s.edge_s,
+            "mu_range": [s.mu_lo, s.mu_hi], "fps_hz": s.fps, "frames": s.frames,
+            "record_s": s.record_s, "edge_s": s.edge_s,
             "slip_window_s": s.slip_window_s, "drive": s.drive.to_dict(),
             "first_step_max_mu_req": self.first_step_max_mu_req,
             "drive_ci_corners_hold": self.ci_corners_hold,
             "objective": s.objective, "expected_relative_width": self.expected_width,
             "worst_relative_width": self.worst_width,
+            "width_prediction": None if self.width is None else summary(self.width, s.objective),
             "median_relative_width": float(np.median(self.relative_width)),
             "table": [{"mu": float(m), "t_slip_s": float(t), "mu_low": float(a),
                        "mu_high": float(b), "relative_width": float((b - a) / m)}
@@ -277,7 +296,7 @@ def _evaluate(spec: DesignSpec, span: int, te: float, rounding: str, w0_hz: np.n
         lo = m_rec[np.maximum(idx - 1 - k_delta, 0)]
         hi = m_rec[np.minimum(idx + k_delta, u.size - 1)]
         rel = (hi - lo) / mus
-        score = float(np.mean(rel) if spec.objective == "expected" else np.max(rel))
+        score = float(np.max(rel) if spec.objective == "worst" else np.mean(rel))
         out.append((score, int(w0_hz[i]), t0, ts + t0, lo, hi, float(first[i])))
     return out
 
@@ -310,11 +329,36 @@ def design_staircase(spec: DesignSpec) -> Design:
                           f"{spec.record_s:.3g} s record at mu = {spec.mu_hi:g} (none found: "
                           "narrow the range, or change the speed limits or the drive)")
     best.sort(key=lambda c: (c[0], abs(c[1])))
-    fine = 1.0 / spec.fps
     corners = drive_corners(spec.drive)
     fallback = None
-    for score, w0_hz, span, te, rounding in best[:30]:  # confirm on the frame grid
-        got = _evaluate(spec, span, te, rounding, np.array([float(w0_hz)]), mus, fine)
+    for design in _confirmed(spec, best, mus):
+        if not corners:
+            return _with_width(design)
+        # prefer the best design that also holds for every corner of the drive's intervals
+        design.ci_corners_hold = all(holds(replace(spec, drive=c), design.staircase)
+                                     for c in corners)
+        if design.ci_corners_hold:
+            return _with_width(design)
+        fallback = fallback or design
+    if fallback is not None:
+        return _with_width(fallback)
+    raise DesignError("--mu-range", [spec.mu_lo, spec.mu_hi],
+                      "a range with a design that holds on the frame grid (none did)")
+
+
+def _confirmed(spec: DesignSpec, best: list[tuple], mus: np.ndarray) -> list[Design]:
+    """The leading candidates confirmed on the frame grid, best first: the noise-free ranking's
+    first 30, or (``predicted``) its first RERANK_TOP and the best at each start speed ranked by
+    the predicted measured width."""
+    pool = best[:30]
+    if spec.objective == "predicted":
+        per_speed: dict[int, tuple] = {}
+        for c in best:
+            per_speed.setdefault(c[1], c)
+        pool = best[:RERANK_TOP] + [c for c in per_speed.values() if c not in best[:RERANK_TOP]]
+    out = []
+    for _, w0_hz, span, te, rounding in pool:
+        got = _evaluate(spec, span, te, rounding, np.array([float(w0_hz)]), mus, 1.0 / spec.fps)
         if not got:
             continue
         s, w, t0, ts, lo, hi, first = got[0]
@@ -322,18 +366,17 @@ def design_staircase(spec: DesignSpec) -> Design:
         end = round(w + span * spec.step_hz, 9)
         design = Design(spec, d * w, d * (int(end) if float(end).is_integer() else end), t0,
                         te, rounding, mus, ts, lo, hi, first, s)
-        if not corners:
-            return design
-        # prefer the best design that also holds for every corner of the drive's intervals
-        design.ci_corners_hold = all(holds(replace(spec, drive=c), design.staircase)
-                                     for c in corners)
-        if design.ci_corners_hold:
-            return design
-        fallback = fallback or design
-    if fallback is not None:
-        return fallback
-    raise DesignError("--mu-range", [spec.mu_lo, spec.mu_hi],
-                      "a range with a design that holds on the frame grid (none did)")
+        if spec.objective == "predicted":
+            pred = predict_staircase(spec, design.staircase, spec.mu_grid(RERANK_MUS))
+            design.score = width_score(pred, "expected")
+        out.append(design)
+    return sorted(out, key=lambda dz: dz.score) if spec.objective == "predicted" else out
+
+
+def _with_width(design: Design) -> Design:
+    """The design with its predicted ``abu measure`` width on its mu grid."""
+    design.width = predict_staircase(design.spec, design.staircase, design.mu)
+    return design
 
 
 def drive_corners(drive: Drive) -> list[Drive]:
@@ -379,42 +422,3 @@ def predict(spec: DesignSpec, staircase: Staircase, mus: np.ndarray) -> dict[str
             "mu": mus, "t_slip_s": np.where(inside, t[idx_c], nan),
             "mu_low": np.where(inside, m_rec[np.maximum(idx_c - 1 - k, 0)], nan),
             "mu_high": np.where(inside, m_rec[np.minimum(idx_c + k, t.size - 1)], nan)}
-
-
-def check_design(design: Design, mus: np.ndarray | None = None, fmu_dir: Any = None
-                 ) -> list[dict[str, Any]]:
-    """Co-simulate the design on the FMUs at ``mus`` (default: the range's ends).
-
-    Each row: mu, t_slip_s, mu_low, mu_high (the co-simulation's bounds), first_step_stuck,
-    slip_inside (edge included), brackets.
-    """
-    from abu_model.params import PlantParams
-
-    from harness.experiments.staircase import StaircaseExperiment, run_staircase
-
-    spec = design.spec
-    mus = np.array([spec.mu_lo, spec.mu_hi]) if mus is None else np.asarray(mus, float)
-    stair = design.staircase
-    second = stair.step_times[1]
-    t_pred = predict(spec, stair, mus)["t_slip_s"]
-    rows = []
-    for mu, tp in zip(mus, t_pred):
-        plant = PlantParams(ball=replace(spec.ball, mu=float(mu), mu_d=None),
-                            tau_motor=spec.drive.tau_motor)
-        # Stop 30 ms after the predicted slip (the slipping ball is the costly part): a slip
-        # later than that, but inside the record, would fail the check, never pass it.
-        t_end = spec.record_s if not np.isfinite(tp) else min(spec.record_s, float(tp) + 0.03)
-        # CHECK_COMM_STEP: the stepping mode the design is validated in
-        exp = StaircaseExperiment(plant, stair.omega0, stair.omega_end, stair.t0, stair.te,
-                                  t_end=t_end, step=stair.step, rounding=stair.rounding,
-                                  zeta=spec.drive.zeta, omega_n=spec.drive.omega_n,
-                                  comm_step=CHECK_COMM_STEP)
-        s = run_staircase(exp, fmu_dir).summary
-        ts = s["t_slip"]
-        rows.append({"mu": float(mu), "t_slip_s": ts, "mu_low": s["mu_low"],
-                     "mu_high": s["mu_high"],
-                     "first_step_stuck": ts is None or ts > second,
-                     "slip_inside": ts is not None
-                     and spec.edge_s - 1e-3 <= ts <= spec.record_s - spec.edge_s + 1e-3,
-                     "brackets": bool(s.get("brackets_mu"))})
-    return rows

@@ -7,6 +7,11 @@ mu there it keeps the ball stuck through the first step, puts the slip inside th
 has the smallest worst-case predicted interval. Its predicted combined interval at mu is
 [max(L, low(mu)), min(H, high(mu))]; the proposal reports its worst case over [L, H] beside
 the current width.
+
+With the design's predicted ``abu measure`` width w(mu) (:mod:`.width_model`, expected and 90 %
+range) the measured interval at mu is about mu [1 - w/2, 1 + w/2] (w relative to its mid), and
+the combined one its intersection with [L, H]: ``predicted_combined_width`` gives its relative
+width (hi - lo) / mid, mean over the log-spaced mu grid of the range, expected and 90 % range.
 """
 from __future__ import annotations
 
@@ -45,6 +50,21 @@ class Proposal:
     combined_low: np.ndarray
     combined_high: np.ndarray
 
+    def combined_relative_width(self) -> dict[str, float | None]:
+        """Predicted relative width of the combined interval after the run (expected and
+        90 % range), mean over the mu grid; None without a width prediction."""
+        pred = self.design.width
+        if pred is None:
+            return {"expected": None, "low90": None, "high90": None}
+        lo, hi = self.current
+        mu = self.design.mu
+        out: dict[str, float | None] = {}
+        for key in ("expected", "low90", "high90"):
+            w = np.minimum(getattr(pred, key), 2.0)        # a null bound: nothing gained
+            a, b = np.maximum(lo, mu * (1 - w / 2)), np.minimum(hi, mu * (1 + w / 2))
+            out[key] = float(np.mean((b - a) / (0.5 * (a + b))))
+        return out
+
     @property
     def worst_combined_width(self) -> float:
         """Largest predicted width of the combined interval over the range [-]."""
@@ -58,6 +78,8 @@ class Proposal:
                 "predicted_worst_combined_width": self.worst_combined_width,
                 "predicted_median_combined_width":
                     float(np.median(self.combined_high - self.combined_low)),
+                "current_relative_width": (hi - lo) / (0.5 * (hi + lo)),
+                "predicted_combined_width": self.combined_relative_width(),
                 "predicted_combined": [{"mu": float(m), "mu_low": float(a), "mu_high": float(b)}
                                        for m, a, b in zip(self.design.mu, self.combined_low,
                                                           self.combined_high)],

@@ -1,0 +1,311 @@
+"""Does ``abu design`` predict what ``abu measure`` delivers? Designed runs, rendered and measured.
+
+For each prior range (a factor of 2 wide) and drive, ``abu design --json --no-check`` plans the
+staircase; each run then draws a true mu log-uniformly across the range and mu_d / mu uniformly
+in [0.6, 1], takes the lighting, lens, sensor and set-up of the harsh twin's
+``twin.scenario.random_scenario(seed)`` (random lighting and lens; the drawn drive is replaced by
+the designed staircase on the drive, a digital PI loop at the frame rate with the drive's torque
+lag and setpoint weight), renders the recording of the design's length and measures it with
+``abu measure``. Printed, per slice of seeds and overall:
+
+* measured / predicted relative width (``relative_width`` of ``abu measure``, (hi - lo) / mid,
+  against ``harness.planning.width_model``'s expected width at the true mu and at mu_d / mu = 0.8)
+  and the share within [0.77, 1.3] (target >= 90 %), the share inside the predicted 90 % range;
+* the same ratio with the camera's noise known (this run's measured theta and beta noise, what
+  an earlier recording of the same set-up states: ``--noise-from``, ``abu next``);
+* the share of runs with both bounds finite (target: all), coverage of the stated 95 %
+  (target >= 95 %), the median measured width (the report's single run: 8.7 %), and what sets
+  it: the medians of ``abu measure``'s own parts (beta profile, lens prior, truncation bound,
+  kinematic noise).
+
+The width model's constants were calibrated on seeds 0-71 (``--calibrate ROWS`` on the rows of
+a run with ``--first 0``, whose designs came from the noise-free ranking of the code before the
+width model); the validation slice, seeds 1000-1071 with the designs of the predicted ranking,
+was not used for it. Run (two worker processes, about 30 min on the shared 2-core machine)::
+
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --jobs 2
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 0 --jobs 2 --rows cal.jsonl \
+        --design-args="--objective expected"      # the calibration slice's designs
+    python benchmarks/bench_designed_runs.py --calibrate cal.jsonl   # fit the constants
+    python benchmarks/bench_designed_runs.py --report cal.jsonl      # figures of saved rows
+
+``--rows FILE`` writes one JSON row per run (what ``--calibrate`` and ``--report`` read).
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import os
+import sys
+import tempfile
+from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import replace
+from multiprocessing import Pool
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from abu.cli.main import main as abu_main  # noqa: E402
+from controller.drive import Drive  # noqa: E402
+from twin.drives import DriveSpec  # noqa: E402
+from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario  # noqa: E402
+
+TWO_PI = 2.0 * math.pi
+RANGES = ((0.01, 0.02), (0.02, 0.04), (0.03, 0.06))
+#: the report's loop, and PI loops with 5-25 ms torque lags and setpoint weights
+DRIVES = {"report loop": Drive(),
+          "PI 5 ms": Drive("pi-lag", 0.7, 12.0, 0.005),
+          "PI 15 ms b 0.8": Drive("pi-lag-weighted", 0.9, 20.0, 0.015, 0.8),
+          "PI 25 ms b 0.6": Drive("pi-lag-weighted", 0.8, 15.0, 0.025, 0.6)}
+RATIO_BAND = (0.77, 1.3)
+MU_D_RATIO = (0.6, 1.0)
+
+
+def configs() -> list[tuple[tuple[float, float], str]]:
+    """Every (range, drive name) pair, in a fixed order."""
+    return [(r, d) for d in DRIVES for r in RANGES]
+
+
+def run_design(mu_range: tuple[float, float], drive_name: str, extra: list[str]) -> dict:
+    """``abu design --json --no-check`` for the range and drive; its JSON."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "drive.json"
+        path.write_text(json.dumps(DRIVES[drive_name].to_dict()))
+        out = io.StringIO()
+        with redirect_stdout(out), redirect_stderr(io.StringIO()):
+            status = abu_main(["design", "--mu-range", repr(mu_range[0]), repr(mu_range[1]),
+                               "--drive", str(path), "--json", "--no-check", *extra])
+    if status != 0:
+        raise SystemExit(f"abu design failed for {mu_range} {drive_name} (exit {status})")
+    return json.loads(out.getvalue())
+
+
+def draw(seed: int, mu_range: tuple[float, float]) -> tuple[float, float]:
+    """True (mu, mu_d) of a run: mu log-uniform over the range, mu_d / mu uniform."""
+    rng = np.random.default_rng([seed, 7])
+    lo, hi = mu_range
+    mu = lo * (hi / lo) ** rng.uniform()
+    return mu, mu * rng.uniform(*MU_D_RATIO)
+
+
+def staircase_drive(design: dict, drive: Drive) -> DriveSpec:
+    """The designed staircase on the drive, as the twin's digital PI loop."""
+    return DriveSpec(kind="staircase_pi", omega0=design["omega0_hz"] * TWO_PI,
+                     omega_end=design["omega_end_hz"] * TWO_PI, t0=design["t0_s"],
+                     te=design["te_s"], step=design["step_hz"] * TWO_PI,
+                     rounding=design["rounding"], zeta=drive.zeta, omega_n=drive.omega_n,
+                     tau_motor=drive.tau_motor, setpoint_weight=drive.setpoint_weight)
+
+
+def one(job: tuple) -> dict:
+    """Render and measure one designed run; its row (measured and predicted)."""
+    seed, mu_range, drive_name, design = job
+    mu, mu_d = draw(seed, mu_range)
+    frames_n = int(round(design["record_s"] * design["fps_hz"])) + 1
+    scn = random_scenario(seed, n_frames=max(frames_n, 1000))
+    scn = replace(scn, drive=staircase_drive(design, DRIVES[drive_name]), n_frames=frames_n,
+                  ball=replace(scn.ball, mu=mu, mu_d=mu_d), predicted_slip_s=None)
+    state, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, state, pos)
+    row = {"seed": seed, "mu_range": list(mu_range), "drive": drive_name, "mu": mu,
+           "mu_d": mu_d, "design": {k: design[k] for k in (
+               "omega0_hz", "omega_end_hz", "t0_s", "te_s", "rounding", "step_hz", "fps_hz",
+               "frames", "record_s")},
+           "t_slip_true": float(state["switches"][0]) if len(state["switches"]) else None,
+           "reflections": int(scn.lighting.reflections),
+           "exposure_fraction": scn.optics.exposure_fraction, "pixel_size_m": scn.pixel_size}
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = Path(tmp) / "rec.npy"
+        np.save(rec, frames)
+        args = ["measure", str(rec), "--out", str(Path(tmp) / "m"), "--quiet", "--no-plots",
+                "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+        if scn.lighting.reflections == 2:
+            args += ["--ball-reflections", "2"]
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            row["exit"] = abu_main(args)
+        if row["exit"] != 0:
+            return row
+        s = json.loads((Path(tmp) / "m" / "summary.json").read_text())
+    mf, nz = s.get("model_fit") or {}, s.get("noise") or {}
+    row.update({k: s.get(k) for k in ("mu_low", "mu_high", "relative_width", "status",
+                                      "t_slip")})
+    row.update({k: mf.get(k) for k in ("profile_mu_low", "profile_mu_high",
+                                       "kinematic_rel_sigma_at_slip",
+                                       "kinematic_rel_bias_at_slip", "lower_bound_sup_z",
+                                       "sigma_leftover_rad", "leftover_tau_s")})
+    row["sigma_white_beta_rad"] = (mf.get("noise_model") or {}).get("sigma_white_rad")
+    row.update({k: nz.get(k) for k in ("sigma_theta_rad", "sigma_beta_rad",
+                                       "sigma_omega_dot_rad_s2")})
+    return row
+
+
+def predicted(row: dict, design: dict, camera: bool = False) -> dict:
+    """The width model's prediction for this run's design at its true mu; ``camera``: with
+    the camera's noise known (this run's measured theta and beta noise, what an earlier
+    recording of the same set-up states: ``abu next`` reads it from the summaries)."""
+    from harness.planning.design_width import predict_run_width
+    from harness.planning.width_model import CALIBRATED, with_camera_noise
+    c = CALIBRATED
+    if camera:
+        c = with_camera_noise(c, [{"noise": {"sigma_theta_rad": row["sigma_theta_rad"]},
+                                   "model_fit": {"noise_model": {
+                                       "sigma_white_rad": row["sigma_white_beta_rad"],
+                                       "sigma_leftover_rad": row["sigma_leftover_rad"]}}}])
+    return predict_run_width(design, DRIVES[row["drive"]], row["mu"], constants=c)
+
+
+def finite(r: dict) -> bool:
+    return r.get("mu_low") is not None and r.get("mu_high") is not None
+
+
+def covered(r: dict) -> bool:
+    lo, hi = r.get("mu_low"), r.get("mu_high")
+    return (lo is None or lo <= r["mu"]) and (hi is None or r["mu"] <= hi)
+
+
+def report(rows: list[dict], label: str) -> None:
+    """Print the figures of one slice of runs."""
+    ok = [r for r in rows if r.get("exit") == 0]
+    fin = [r for r in ok if finite(r)]
+    ratio = np.array([r["relative_width"] / r["pred"]["expected"] for r in fin])
+    ratio_cam = np.array([r["relative_width"] / r["pred_camera"]["expected"] for r in fin])
+    band_cam = (ratio_cam >= RATIO_BAND[0]) & (ratio_cam <= RATIO_BAND[1])
+    inside = np.array([r["pred"]["low90"] <= r["relative_width"] <= r["pred"]["high90"]
+                       for r in fin])
+    band = (ratio >= RATIO_BAND[0]) & (ratio <= RATIO_BAND[1])
+    w = np.array([r["relative_width"] for r in fin])
+    print(f"{label}: {len(rows)} runs, {len(ok)} measured, {len(fin)} with finite bounds "
+          f"({100 * len(fin) / max(len(rows), 1):.1f} %), coverage "
+          f"{100 * np.mean([covered(r) for r in ok]):.1f} % of the stated 95 %")
+    if fin:
+        print(f"  measured/predicted width: median {np.median(ratio):.3f}, 5-95 % "
+              f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
+              f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} % (target >= 90 %); "
+              f"inside the predicted 90 % range: {100 * inside.mean():.1f} %")
+        print(f"  with the camera's noise known: median {np.median(ratio_cam):.3f}, 5-95 % "
+              f"[{np.percentile(ratio_cam, 5):.3f}, {np.percentile(ratio_cam, 95):.3f}], "
+              f"within [{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band_cam.mean():.1f} %")
+        print(f"  median measured width {100 * np.median(w):.1f} % (report's run 8.7 %), "
+              f"predicted median {100 * np.median([r['pred']['expected'] for r in fin]):.1f} %")
+        parts = np.array([[(r["profile_mu_high"] - r["profile_mu_low"]) / r["mu"],
+                           2 * (r["pred"]["lens"] or 0.0),
+                           2 * max(r["kinematic_rel_bias_at_slip"] - (r["pred"]["lens"] or 0.0),
+                                   0.0),
+                           (r["lower_bound_sup_z"] + 1.96) * r["kinematic_rel_sigma_at_slip"]]
+                          for r in fin])
+        med = 100 * np.median(parts, axis=0)
+        print(f"  what sets it (medians of abu measure's parts, relative to mu): beta profile "
+              f"{med[0]:.1f} %, lens prior 2 A (lever/mu + 2) {med[1]:.1f} %, truncation bound "
+              f"x 2 {med[2]:.1f} %, kinematic noise (z_lo + z) sigma {med[3]:.1f} %")
+
+
+def calibrate(rows: list[dict]) -> None:
+    """Fit the width model's free constants on measured rows (the calibration slice) and print
+    them: sigma_beta and sigma_theta are the medians of what ``abu measure`` reported (beta:
+    white and leftover in quadrature), z_low the median Rice quantile it used, k_emerge makes
+    the median of ln(measured / predicted) zero (bisection), the 90 % range's factors leave 5 %
+    of the runs below the smallest and 5 % above the largest width over mu_d / mu."""
+    from dataclasses import replace as dc_replace
+
+    from harness.planning.design_width import predict_run_width
+    from harness.planning.width_model import CALIBRATED
+
+    fin = [r for r in rows if r.get("exit") == 0 and finite(r)]
+    base = dc_replace(
+        CALIBRATED, sigma_beta_rad=float(np.median([math.hypot(
+            r["sigma_white_beta_rad"] or 0.0, r["sigma_leftover_rad"] or 0.0) for r in fin])),
+        sigma_theta_rad=float(np.median([r["sigma_theta_rad"] for r in fin])),
+        z_low=float(np.median([r["lower_bound_sup_z"] for r in fin])),
+        range_log_low=0.0, range_log_high=0.0)
+
+    def preds(k: float) -> list[dict]:
+        c = dc_replace(base, k_emerge=k)
+        return [predict_run_width(r["design"], DRIVES[r["drive"]], r["mu"], constants=c)
+                for r in fin]
+
+    def log_ratio(ps: list[dict], key: str) -> np.ndarray:
+        return np.array([math.log(r["relative_width"] / p[key]) for r, p in zip(fin, ps)])
+
+    lo, hi = 1e-3, 30.0
+    for _ in range(16):   # bisection on the median log ratio (it falls as k grows)
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if np.median(log_ratio(preds(mid), "expected")) > 0 else (lo, mid)
+    k = math.sqrt(lo * hi)
+    ps = preds(k)
+    res = log_ratio(ps, "expected")
+    r_lo = float(np.percentile(log_ratio(ps, "low90"), 5))
+    r_hi = float(np.percentile(log_ratio(ps, "high90"), 95))
+    print(f"calibration on {len(fin)} runs: sigma_beta_rad {base.sigma_beta_rad:.4g}, "
+          f"sigma_theta_rad {base.sigma_theta_rad:.4g}, z_low {base.z_low:.4g}, k_emerge "
+          f"{k:.4g}, range_log_low {r_lo:.4g}, range_log_high {r_hi:.4g}; measured/predicted "
+          "within [0.77, 1.3]: "
+          f"{100 * np.mean((res >= math.log(0.77)) & (res <= math.log(1.3))):.1f} %")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--first", type=int, default=1000, help="first seed")
+    ap.add_argument("--runs", type=int, default=72, help="rendered runs in all")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--rows", default=None, help="write the rows as JSON lines here")
+    ap.add_argument("--design-args", default="", help="extra options of abu design")
+    ap.add_argument("--calibrate", default=None, help="fit the width model's constants on the "
+                                                      "rows of this file and exit")
+    ap.add_argument("--report", default=None, help="print the figures of the rows of this file "
+                                                   "(predicted with the current constants)")
+    a = ap.parse_args()
+    if a.calibrate:
+        calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
+        return
+    if a.report:   # figures of saved rows, predicted again with the current constants
+        rows = [json.loads(x) for x in Path(a.report).read_text().splitlines() if x]
+        for r in rows:
+            if r.get("exit") == 0:
+                r["pred"] = predicted(r, r["design"])
+                r["pred_camera"] = predicted(r, r["design"], camera=True)
+        print(f"rows of {a.report}: seeds {min(r['seed'] for r in rows)}.."
+              f"{max(r['seed'] for r in rows)}")
+        for dname in DRIVES:
+            report([r for r in rows if r["drive"] == dname], f"drive {dname}")
+        report(rows, "all runs")
+        return
+    cfg = configs()
+    designs = {c: run_design(*c, a.design_args.split()) for c in cfg}
+    for (rng, dname), d in designs.items():
+        w = d.get("width_prediction", {})
+        print(f"design {dname:16s} [{rng[0]:g}, {rng[1]:g}]: omega0 {d['omega0_hz']} Hz -> "
+              f"{d['omega_end_hz']:g} Hz, t0 {d['t0_s']:g} s, te {d['te_s']:.3g} s, "
+              f"{d['frames']} frames; predicted width expected "
+              f"{100 * w.get('expected', math.nan):.1f} % (90 %: "
+              f"{100 * w.get('low90', math.nan):.1f}-{100 * w.get('high90', math.nan):.1f} %)")
+    jobs = [(s, *cfg[(s - a.first) % len(cfg)], designs[cfg[(s - a.first) % len(cfg)]])
+            for s in range(a.first, a.first + a.runs)]
+    if a.jobs > 1:
+        pool = Pool(a.jobs)
+        rows = pool.map(one, jobs, chunksize=1)
+        pool.close()
+        pool.join()
+    else:
+        rows = [one(j) for j in jobs]
+    if a.rows:
+        Path(a.rows).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    for r, j in zip(rows, jobs):
+        if r.get("exit") == 0:
+            r["pred"] = predicted(r, j[3])
+            r["pred_camera"] = predicted(r, j[3], camera=True)
+    print(f"seeds {a.first}..{a.first + a.runs - 1}, {len(cfg)} designs (ranges "
+          f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in RANGES)} x drives "
+          f"{', '.join(DRIVES)}), true mu log-uniform in each range, mu_d/mu in {MU_D_RATIO}, "
+          "lighting and lens of twin.scenario.random_scenario(seed)")
+    for dname in DRIVES:
+        report([r for r in rows if r["drive"] == dname], f"drive {dname}")
+    report(rows, "all runs")
+
+
+if __name__ == "__main__":
+    main()

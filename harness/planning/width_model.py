@@ -1,0 +1,258 @@
+"""What ``abu measure`` will report for a planned run: its relative width, expected and 90 %
+range.
+
+Input: the planned kinematics of the ABU with the ball stuck on the camera's frame grid (time t,
+theta(t), omega(t), omega_dot(t); any drive: a staircase through the identified loop or a
+prescribed profile), the lever ratio (l - d/5)/l and the true mu of interest. The width is built
+from what sets it in the measurement (``measurement.inference``, documented in
+docs/measurement-analysis.md), each part computed from the plan:
+
+* **the slip's emergence from beta's noise** (the profile likelihood's part). After onset the
+  slip speed obeys u' = [omega^2 (q - mu_d) - mu_d |omega| (1 + lever) u] / 1.4 (q = mu_req,
+  the ball re-sticks where u returns to 0); its deviation D(tau) = int u grows as tau^3 when
+  mu_d = mu (q - mu grows linearly) and as tau^2 when mu_d < mu. The data tell a slip from
+  noise once D reaches ``k_emerge`` sigma_beta, at tau; the onset is located to +- tau and the
+  profile spans the running max of the measured q over [t_s - tau, t_s + tau]. The measured q
+  is the Savitzky-Golay view of the plan (window and degree of ``abu measure``'s default
+  estimator), so a staircase's steps are seen smoothed, as the measurement sees them. (The fit
+  uses the whole slip, so ``k_emerge`` comes out well below 1.)
+* **the kinematic noise at the slip**: the SG derivative filters' noise gains times theta's
+  tracking noise, relative to omega_dot and omega at the slip; z sigma on the upper bound, the
+  Rice sup quantile (about 3) on the lower one.
+* **the estimator's truncation bound** (Richardson between the window and its half, as the
+  estimator states it) and **the lens prior** A (omega^2 / |omega_dot| + 2), added linearly on
+  both sides. At the slip omega^2 / |omega_dot| = lever / mu, so the lens part is
+  2 A (lever / mu + 2) whatever the speed: a floor of the uncalibrated camera.
+
+Free constants (:class:`WidthConstants`), calibrated on rendered designed runs
+(``benchmarks/bench_designed_runs.py --calibrate``; the seeds and the fit are in
+docs/design.md): the emergence threshold ``k_emerge``, beta's and theta's noise, the lower
+bound's quantile and the factors of the 90 % range around the widths at mu_d / mu in [0.6, 1]
+(the measurement does not know mu_d). Constants of ``abu measure`` duplicated here (harness does not import measurement):
+the SG window 42 ms and degree 9, the lens prior 8e-4 rad, the confidence 95 %.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: ``abu measure``'s defaults (measurement.inference.options.AnalysisOptions,
+#: measurement.inference.types.InferenceOptions), duplicated: harness does not import measurement.
+SG_WINDOW_S = 0.042
+SG_POLYORDER = 9
+THETA_HARMONIC_RAD = 8e-4
+Z95 = 1.959964
+#: mu_d / mu spanned by the range (the measurement's profile; the twin's family draws 0.6-1)
+MU_D_RATIOS = (0.6, 0.8, 1.0)
+
+
+@dataclass(frozen=True)
+class WidthConstants:
+    """The width model's constants (SI; calibrated ones marked).
+
+    Attributes:
+        k_emerge: deviation of beta [in sigma_beta] at which a slip is told from noise
+            (calibrated).
+        sigma_beta_rad: beta's noise, tracking and lighting leftover, 1 sigma [rad]
+            (calibrated: median over the calibration runs).
+        sigma_theta_rad: theta's tracking noise, 1 sigma [rad] (median over the runs).
+        range_log_low, range_log_high: ln of the factors below the smallest and above the
+            largest width over mu_d / mu in [0.6, 1] that hold 5 % of the calibration runs
+            each (calibrated): the 90 % range.
+        z_low: quantile of the lower bound's kinematic noise (Rice sup quantile, typically 3).
+        theta_harmonic_rad: ``abu measure``'s lens prior [rad] (0 with a calibrated camera
+            that states none).
+        sg_window_s, sg_polyorder: ``abu measure``'s Savitzky-Golay estimator.
+        horizon_s: longest emergence followed after the onset [s].
+    """
+
+    k_emerge: float = 3.0
+    sigma_beta_rad: float = 8e-4
+    sigma_theta_rad: float = 1.5e-4
+    range_log_low: float = -0.3
+    range_log_high: float = 0.5
+    z_low: float = 2.8
+    theta_harmonic_rad: float = THETA_HARMONIC_RAD
+    sg_window_s: float = SG_WINDOW_S
+    sg_polyorder: int = SG_POLYORDER
+    horizon_s: float = 0.2
+
+
+#: The calibrated constants (docs/design.md, "Predicted width"): ``python
+#: benchmarks/bench_designed_runs.py --calibrate ROWS`` on the 72 designed runs of seeds 0-71.
+CALIBRATED = WidthConstants(k_emerge=0.0556, sigma_beta_rad=6.52e-4, sigma_theta_rad=2.14e-4,
+                            z_low=2.80, range_log_low=-0.273, range_log_high=0.192)
+
+
+def with_camera_noise(constants: WidthConstants, summaries: list[dict]) -> WidthConstants:
+    """The constants with theta's and beta's noise of this camera: the medians over ``abu
+    measure`` summaries of earlier recordings (``noise.sigma_theta_rad``; beta: the model
+    fit's white and leftover noise in quadrature); unchanged where the summaries lack them."""
+    from dataclasses import replace
+
+    th, be = [], []
+    for s in summaries:
+        th.append((s.get("noise") or {}).get("sigma_theta_rad"))
+        nm = (s.get("model_fit") or {}).get("noise_model") or {}
+        if nm.get("sigma_white_rad") is not None:
+            be.append(math.hypot(nm["sigma_white_rad"], nm.get("sigma_leftover_rad") or 0.0))
+    th = [x for x in th if isinstance(x, (int, float)) and x > 0]
+    be = [x for x in be if x > 0]
+    return replace(constants,
+                   sigma_theta_rad=float(np.median(th)) if th else constants.sigma_theta_rad,
+                   sigma_beta_rad=float(np.median(be)) if be else constants.sigma_beta_rad)
+
+
+@dataclass
+class WidthPrediction:
+    """Predicted ``abu measure`` relative width (hi - lo) / mid at each mu [-].
+
+    Attributes:
+        mu: the true mu values [-].
+        t_slip_s: the planned slip time [s] (NaN: no slip in the record's trusted part).
+        expected: width at mu_d / mu = 0.8 [-] (inf: a bound will be null).
+        low90, high90: the 90 % range [-].
+        profile, kinematic_noise, truncation, lens: the parts at mu_d / mu = 0.8: the beta
+            profile's width and the relative kinematic errors at the slip (1 sigma noise,
+            truncation bound, lens prior) [-].
+    """
+
+    mu: np.ndarray
+    t_slip_s: np.ndarray
+    expected: np.ndarray
+    low90: np.ndarray
+    high90: np.ndarray
+    profile: np.ndarray
+    kinematic_noise: np.ndarray
+    truncation: np.ndarray
+    lens: np.ndarray
+    constants: WidthConstants = field(default_factory=WidthConstants)
+
+    def row(self, i: int) -> dict[str, float | None]:
+        """JSON-ready figures at mu[i] (None for a null bound)."""
+        def f(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+        return {"mu": float(self.mu[i]), "t_slip_s": f(self.t_slip_s[i]),
+                "expected": f(self.expected[i]), "low90": f(self.low90[i]),
+                "high90": f(self.high90[i]), "profile": f(self.profile[i]),
+                "kinematic_noise": f(self.kinematic_noise[i]),
+                "truncation": f(self.truncation[i]), "lens": f(self.lens[i])}
+
+
+def _sg_coeffs(window: int, polyorder: int, deriv: int, delta: float) -> np.ndarray:
+    """Savitzky-Golay "dot" weights of the window's centre on positions scaled to [-1, 1]
+    (as the measurement's estimator: SciPy's raw-offset weights lose accuracy at degree 9)."""
+    m = window // 2
+    u = np.arange(-m, m + 1) / m
+    pinv = np.linalg.pinv(np.vander(u, polyorder + 1, increasing=True))
+    return math.factorial(deriv) * pinv[deriv] / (m * delta) ** deriv
+
+
+def _sg_views(theta: np.ndarray, h: float, c: WidthConstants
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, int]:
+    """SG omega, omega_dot, truncation bound [rad/s^2] of the noise-free plan, the noise gains
+    of omega and omega_dot [1/s, 1/s^2] and the half window [samples] (as the estimator)."""
+    n = int(round(c.sg_window_s / h))
+    n = max(n | 1, c.sg_polyorder + 2 + (c.sg_polyorder + 1) % 2)
+    c1 = _sg_coeffs(n, c.sg_polyorder, 1, h)
+    c2 = _sg_coeffs(n, c.sg_polyorder, 2, h)
+    x = theta - theta[theta.size // 2]
+    omega = np.correlate(x, c1, mode="same")
+    alpha = np.correlate(x, c2, mode="same")
+    half = max(int(round(0.5 * n)) | 1, c.sg_polyorder + 2 + (c.sg_polyorder + 1) % 2)
+    c2h = _sg_coeffs(half, c.sg_polyorder, 2, h)
+    pad = (n - half) // 2
+    noise_diff = c.sigma_theta_rad * float(np.linalg.norm(c2 - np.pad(c2h, (pad, pad))))
+    a_half = np.correlate(x, c2h, mode="same")
+    bias = np.maximum(np.abs(alpha - a_half) - 3.0 * noise_diff, 0.0) * 3.0
+    k = max(1, n // 4) | 1
+    bias = np.lib.stride_tricks.sliding_window_view(np.pad(bias, k // 2, mode="edge"), k).max(1)
+    return (omega, alpha, bias, float(np.linalg.norm(c1)), float(np.linalg.norm(c2)), n // 2)
+
+
+def _deviation(q: np.ndarray, w2: np.ndarray, wa: np.ndarray, h: float, lever: float,
+               start: np.ndarray, mu_d: np.ndarray, steps: int) -> np.ndarray:
+    """Slip deviation D [rad] of lanes starting at ``start`` (indices) with ``mu_d``, over
+    ``steps`` samples: (lanes, steps) (Heun's method at the frame interval, re-stick at 0)."""
+    n = q.size
+    u = np.zeros(start.size)
+    d = np.zeros(start.size)
+    out = np.empty((start.size, steps))
+    for k in range(steps):
+        out[:, k] = d
+        i = np.minimum(start + k, n - 1)
+        j = np.minimum(i + 1, n - 1)
+        # Heun's step of u (the trapezoid on D): second order at the frame interval
+        f0 = w2[i] * (q[i] - mu_d) - mu_d * wa[i] * (1.0 + lever) * u
+        u1 = u + h * f0 / 1.4
+        f1 = w2[j] * (q[j] - mu_d) - mu_d * wa[j] * (1.0 + lever) * u1
+        u_new = np.maximum(u + 0.5 * h * (f0 + f1) / 1.4, 0.0)
+        d += 0.5 * h * (u + u_new)
+        u = u_new
+    return out
+
+
+def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
+                   mus: np.ndarray | float, lever: float,
+                   constants: WidthConstants = CALIBRATED) -> WidthPrediction:
+    """The relative width ``abu measure`` will report at each true mu (see the module doc).
+
+    Args:
+        t: the camera's frame times [s], equally spaced (the record).
+        theta, omega, omega_dot: the planned ABU motion with the ball stuck [rad, rad/s,
+            rad/s^2] at ``t`` (sign as planned; mu_req uses |omega_dot|).
+        mus: true mu values [-].
+        lever: (l - d/5) / l of the ball [-].
+    """
+    c = constants
+    t = np.asarray(t, float)
+    h = float(t[1] - t[0])
+    mus = np.atleast_1d(np.asarray(mus, float))
+    w_m, a_m, bias, g1, g2, half = _sg_views(np.asarray(theta, float), h, c)
+    q_true = lever * np.abs(omega_dot) / np.maximum(np.asarray(omega, float) ** 2, 1e-300)
+    q_meas = lever * np.abs(a_m) / np.maximum(w_m * w_m, 1e-300)
+    trusted = np.zeros(t.size, bool)
+    trusted[half: t.size - half] = True
+    m_meas = np.maximum.accumulate(np.where(trusted, q_meas, 0.0))
+    m_true = np.maximum.accumulate(q_true)
+    w2, wa = np.asarray(omega, float) ** 2, np.abs(np.asarray(omega, float))
+    steps = max(2, int(round(c.horizon_s / h)))
+    thr = c.k_emerge * c.sigma_beta_rad
+
+    i_s = np.searchsorted(m_true, mus, side="right")          # first sample with q > mu
+    ok = (i_s >= half) & (i_s < t.size - half)
+    i_sc = np.minimum(i_s, t.size - 1)
+    # upper bound: the truth's deviation reaches the threshold at i_hi, for each mu_d / mu
+    ratios = np.asarray(MU_D_RATIOS)
+    lanes_s = np.repeat(i_sc, ratios.size)
+    dev = _deviation(q_true, w2, wa, h, lever, lanes_s, np.outer(mus, ratios).ravel(), steps)
+    reach = np.argmax(dev >= thr, axis=1)
+    reach = np.where(dev[:, -1] >= thr, reach, steps)
+    i_hi = lanes_s + reach
+    upper = np.where(i_hi < t.size - half, m_meas[np.minimum(i_hi, t.size - 1)], np.inf)
+    upper = upper.reshape(mus.size, ratios.size)
+    # the onset is located to +- that emergence time: the profile spans the measured q's
+    # running max over [t_s - tau, t_s + tau]
+    i_lo = lanes_s - reach
+    lower = np.where(i_lo >= half, m_meas[np.clip(i_lo, 0, t.size - 1)], np.nan)
+    lower = lower.reshape(mus.size, ratios.size)
+
+    # kinematic errors at the slip (measured view)
+    a_s, w_s = np.abs(a_m[i_sc]), np.abs(w_m[i_sc])
+    noise = np.hypot(c.sigma_theta_rad * g2 / a_s, 2.0 * c.sigma_theta_rad * g1 / w_s)
+    trunc = bias[i_sc] / a_s
+    lens = c.theta_harmonic_rad * (w_s * w_s / a_s + 2.0)
+    lo = lower * np.maximum(1.0 - c.z_low * noise - trunc - lens, 0.0)[:, None]
+    hi = upper * (1.0 + Z95 * noise + trunc + lens)[:, None]
+    with np.errstate(invalid="ignore"):   # a null bound (NaN / inf) is set to inf below
+        width = (hi - lo) / (0.5 * (hi + lo))
+        prof = (upper[:, 1] - lower[:, 1]) / (0.5 * (upper[:, 1] + lower[:, 1]))
+    width = np.where(ok[:, None] & np.isfinite(lo) & np.isfinite(hi), width, np.inf)
+    mid = 1    # mu_d / mu = 0.8
+    expected = width[:, mid]
+    t_slip = np.where(ok, t[i_sc], np.nan)
+    return WidthPrediction(mus, t_slip, expected, np.min(width, axis=1) * math.exp(
+        c.range_log_low), np.max(width, axis=1) * math.exp(c.range_log_high), prof, noise, trunc,
+        lens, c)
