@@ -238,13 +238,12 @@ def cmd_next(args: argparse.Namespace) -> int:
     from abu.intervals_io import read_intervals
     from harness.planning.next_run import combine, propose_next
 
-    intervals = read_intervals(args.summaries)
-    drive = None
+    drive = load_drive_option(args.drive)
+    if drive is None or not drive.is_tracking:
+        intervals = read_intervals(args.summaries)
     if args.drive is None:  # a drive recorded by 'abu measure --drive'
         recorded = next((i["drive"] for i in intervals if i["drive"]), None)
         drive = None if recorded is None else drive_from_dict(recorded, "drive in a summary")
-    else:
-        drive = load_drive_option(args.drive)
     if drive is not None and drive.is_tracking:
         raise ParameterError("--drive", args.drive or "drive in a summary", "a PI drive: 'abu "
                              "next' plans staircases; for a tracking drive run 'abu design "

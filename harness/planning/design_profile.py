@@ -6,6 +6,7 @@ zero, d(1/|omega|)/dt = -q(t) / lever, so
 
     1 / |omega(t)| = 1 / |omega_e| + (Q(t_e) - Q(t)) / lever,   Q = integral of q.
 
+(braking instead, ``sweep = decelerate``, the default: 1/|omega(t)| = 1/|omega_s| + Q(t)/lever).
 The profile (``profile.json``, :mod:`controller.profile`) holds the start speed, raises q
 smoothly from 0 to ``mu_lo / margin`` (``ramp_in_s``), sweeps it linearly through the prior
 range to ``mu_hi * margin`` at the rate ``sweep_rate`` [1/s] (steep but continuous: no
@@ -41,6 +42,7 @@ from controller.drive import Drive
 from controller.profile import Profile
 
 TWO_PI = 2.0 * math.pi
+SWEEPS = ("decelerate", "accelerate")
 
 
 @dataclass(frozen=True)
@@ -63,6 +65,9 @@ class ProfileDesignSpec:
         knot_spacing_s: profile knots [s].
         sigma_beta, k_sigma, kin_rel: width predictor (see the module doc) [rad, -, -].
         direction: -1 (clockwise, the report's sign) or +1.
+        sweep: ``decelerate`` (default: start at the speed cap and brake, so the low mu of
+            the range slip at the highest speed, where their relative width needs it most)
+            or ``accelerate`` (end at the cap).
     """
 
     mu_lo: float
@@ -86,6 +91,7 @@ class ProfileDesignSpec:
     k_sigma: float = 3.0
     kin_rel: float = 0.01
     direction: int = -1
+    sweep: str = "decelerate"
 
     def __post_init__(self) -> None:
         if not (0 < self.mu_lo < self.mu_hi < 1):
@@ -93,6 +99,8 @@ class ProfileDesignSpec:
                                  "0 < LO < HI < 1 (static friction coefficients)")
         if not self.drive.is_tracking:
             raise ParameterError("--drive", self.drive.source, "a drive of model 'tracking'")
+        if self.sweep not in SWEEPS:
+            raise ParameterError("--sweep", self.sweep, " or ".join(SWEEPS))
         if self.direction not in (-1, 1):
             raise ParameterError("direction", self.direction, "-1 or +1")
         for name in ("fps", "speed_max", "speed_min", "alpha_max", "blur_px_max",
@@ -151,20 +159,29 @@ def q_profile(spec: ProfileDesignSpec, rate: float, t_start: float
                                   "t_sweep_end_s": t2, "t_end_s": t3, "q0": q0, "q1": q1}
 
 
-def make_profile(spec: ProfileDesignSpec, rate: float, t_start: float, speed_end: float
+def speed_curve(spec: ProfileDesignSpec, Q: np.ndarray, speed_cap: float) -> np.ndarray:
+    """|omega(t)| [rad/s] for the integral Q(t) of q: braking from ``speed_cap``
+    (``decelerate``: 1/|w| = 1/cap + Q/lever) or accelerating to it (``accelerate``:
+    1/|w| = 1/cap + (Q_end - Q)/lever)."""
+    if spec.sweep == "decelerate":
+        return 1.0 / (1.0 / speed_cap + Q / spec.lever)
+    return 1.0 / (1.0 / speed_cap + (Q[-1] - Q) / spec.lever)
+
+
+def make_profile(spec: ProfileDesignSpec, rate: float, t_start: float, speed_cap: float
                  ) -> tuple[Profile, dict]:
-    """The profile of sweep rate ``rate`` [1/s] starting at ``t_start`` [s] and ending at
-    |omega| = ``speed_end`` [rad/s] (see the module doc)."""
+    """The profile of sweep rate ``rate`` [1/s] starting at ``t_start`` [s] whose fastest
+    speed is ``speed_cap`` [rad/s] (at the start when braking, at the end when accelerating;
+    see the module doc)."""
     t, (q, Q), phases = q_profile(spec, rate, t_start)
-    inv = 1.0 / speed_end + (Q[-1] - Q) / spec.lever
-    speed = 1.0 / inv
+    speed = speed_curve(spec, Q, speed_cap)
     n = max(2, int(math.ceil((phases["t_end_s"] - t_start) / spec.knot_spacing_s)) + 1)
     tk = np.linspace(t_start, phases["t_end_s"], n)
     wk = spec.direction * np.interp(tk, t, speed)
     profile = Profile(tuple(float(v) for v in tk), tuple(float(v) for v in wk),
                       source="abu design")
-    return profile, {**phases, "speed_start_rad_s": float(speed[0]),
-                     "speed_end_rad_s": float(speed_end)}
+    return profile, {**phases, "sweep": spec.sweep, "speed_start_rad_s": float(speed[0]),
+                     "speed_end_rad_s": float(speed[-1])}
 
 
 def crossing(spec: ProfileDesignSpec, profile: Profile, mus: np.ndarray
@@ -196,22 +213,25 @@ def predict_width(spec: ProfileDesignSpec, mu: np.ndarray, speed: np.ndarray,
 
 
 def _feasible(spec: ProfileDesignSpec, rate: float) -> tuple[float, float, str]:
-    """(t_start, speed_end, '') of the fastest placement of a sweep at ``rate``, or a reason."""
-    cap = spec.speed_cap()
+    """(t_start, fastest speed, '') of a sweep at ``rate`` as fast as the camera and the
+    drive's acceleration allow, or (nan, nan, reason)."""
     t, (q, Q), ph = q_profile(spec, rate, 0.0)
     dur = ph["t_end_s"]
     if dur > spec.record_s - 2 * spec.edge_s:
         return math.nan, math.nan, f"the sweep takes {dur:.3g} s, the record {spec.record_s:.3g} s"
-    speed_end = cap
-    # the acceleration limit: alpha = q omega^2 / lever <= alpha_max at q1 (speed near the end)
-    speed_end = min(speed_end, math.sqrt(spec.alpha_max * spec.lever / ph["q1"]) * 1.0)
-    start = 1.0 / (1.0 / speed_end + Q[-1] / spec.lever)
-    if start < spec.speed_min:
-        return math.nan, math.nan, (f"the start speed would be {start / TWO_PI:.3g} Hz (< "
+    cap = spec.speed_cap()
+    for _ in range(8):   # lower the speed until alpha = q w^2 / lever <= alpha_max everywhere
+        speed = speed_curve(spec, Q, cap)
+        peak = float(np.max(q * speed**2)) / spec.lever
+        if peak <= spec.alpha_max * 1.0001:
+            break
+        cap *= math.sqrt(spec.alpha_max / peak)
+    slowest = float(speed.min())
+    if slowest < spec.speed_min:
+        return math.nan, math.nan, (f"the speed would fall to {slowest / TWO_PI:.3g} Hz (< "
                                     f"{spec.speed_min / TWO_PI:.3g} Hz)")
-    # centre the sweep in the record
-    t_start = max(spec.edge_s, 0.5 * (spec.record_s - dur))
-    return t_start, speed_end, ""
+    t_start = max(spec.edge_s, 0.5 * (spec.record_s - dur))   # centred in the record
+    return t_start, cap, ""
 
 
 @dataclass
@@ -253,11 +273,11 @@ def design_profile(spec: ProfileDesignSpec, rates: np.ndarray | None = None) -> 
     mus = np.linspace(spec.mu_lo, spec.mu_hi, 9)
     best, cands, reasons = None, [], []
     for rate in grid:
-        t_start, speed_end, why = _feasible(spec, float(rate))
+        t_start, cap, why = _feasible(spec, float(rate))
         if why:
             reasons.append(why)
             continue
-        profile, phases = make_profile(spec, float(rate), t_start, speed_end)
+        profile, phases = make_profile(spec, float(rate), t_start, cap)
         c = crossing(spec, profile, mus)
         if not np.all(c["reached"]):
             reasons.append("the loop does not reach mu_hi")

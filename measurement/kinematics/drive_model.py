@@ -157,13 +157,14 @@ class _Model:
         return (r.theta if need_theta else None), r.omega, r.alpha
 
 
-def _whiteness(res: np.ndarray, dt: float) -> dict[str, float]:
+def _whiteness(res: np.ndarray, dt: float, blocks_s: tuple[float, ...] = BLOCKS_S
+               ) -> dict[str, float]:
     """p-value per block length of 'the block means are those of white noise'."""
     from scipy.stats import chi2
 
     s = float(np.std(res))
     out = {}
-    for block_s in BLOCKS_S:
+    for block_s in blocks_s:
         m = max(1, int(round(block_s / dt)))
         k = res.size // m
         if k < 4:
@@ -250,7 +251,7 @@ def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(model.names)}
     std.update(theta0_rad=float(math.sqrt(cov[k, k])), omega_offset_rad_s=float(
         math.sqrt(cov[k + 1, k + 1])))
-    block_p = _whiteness(res, dt)
+    block_p = _whiteness(res, dt, getattr(model, "blocks_s", BLOCKS_S))
     fit = DriveFit(True, "", params, std, omega, alpha, se_w, se_a, rms_ratio, block_p,
                    residual=res * sigma)
     level_each = st.level / max(len(block_p), 1)
@@ -299,7 +300,8 @@ def model_kinematics(fallback: Kinematics, theta: np.ndarray, inp: Any
     refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
     fit = inp.fit(fallback.time, theta, fallback.sigma_theta)
     info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
-            "why": fit.why}
+            "why": fit.why, "theta_harmonics_fitted": bool(fit.accepted and getattr(
+                inp, "theta_harmonics_fitted", False))}
     if not fit.accepted:
         return replace(fallback, settings=info), fit
     return replace(fallback, omega=fit.omega, omega_dot=fit.omega_dot,
