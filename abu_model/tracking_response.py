@@ -17,10 +17,20 @@ fine ODE solution.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, Sequence
 
 import numpy as np
 
-from controller.profile import Profile
+
+class Profile(Protocol):
+    """What the response needs of a :class:`controller.profile.Profile` (knots and the
+    spline's per-segment power coefficients)."""
+
+    times: Sequence[float]
+    omegas: Sequence[float]
+
+    @property
+    def coefficients(self) -> list[tuple[float, float, float, float]]: ...
 
 
 @dataclass(frozen=True)
@@ -55,53 +65,78 @@ def _segments(profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(profile.times, float), np.vstack([coef, last])
 
 
+def _modal(profile: Profile, t: np.ndarray, bandwidth: float, tau: float):
+    """(poles, residues, modal states x_i at t (modes x samples), the reference's
+    derivatives u, u', u'', u''' at t (4 x samples), theta at t relative to the first knot)."""
+    knots, coef = _segments(profile)
+    poles, res = loop_modes(bandwidth, tau)
+    p, r = poles[:, None], res[:, None]
+    w0 = profile.omegas[0]
+    seg = np.searchsorted(knots, t, side="right") - 1       # -1: before the first knot
+    th = np.zeros(t.shape)
+    xs = np.empty((poles.size, t.size), dtype=complex)
+    ud = np.zeros((4, t.size))
+    pre = seg < 0                                            # steady state at w0
+    th[pre] = w0 * (t[pre] - knots[0])
+    x = -w0 / poles                                          # modal states at the knot
+    xs[:, pre] = x[:, None]
+    ud[0, pre] = w0
+    theta_k = 0.0
+    for k in range(len(coef)):
+        sel = seg == k
+        last = k + 1 == len(knots)
+        # the samples of this segment, then (except after the last knot) its end
+        v = t[sel] - knots[k]
+        if not last:
+            v = np.append(v, knots[k + 1] - knots[k])
+        c0, c1, c2, c3 = coef[k]
+        u = c0 + v * (c1 + v * (c2 + v * c3))
+        du = c1 + v * (2 * c2 + 3 * c3 * v)
+        d2u = 2 * c2 + 6 * c3 * v
+        d3u = np.full(v.shape, 6 * c3)
+        big_u = v * (c0 + v * (c1 / 2 + v * (c2 / 3 + v * c3 / 4)))
+        xp = -(u / p + du / p**2 + d2u / p**3 + d3u / p**4)
+        xp0 = -(c0 / p + c1 / p**2 + 2 * c2 / p**3 + 6 * c3 / p**4)
+        xm = xp + (x[:, None] - xp0) * np.exp(p * v)
+        ixp = -(big_u / p + (u - c0) / p**2 + (du - c1) / p**3 + (d2u - 2 * c2) / p**4)
+        ith = theta_k + np.sum(r * (ixp + (x[:, None] - xp0) * np.expm1(p * v) / p),
+                               axis=0).real
+        n = int(sel.sum())
+        xs[:, sel] = xm[:, :n]
+        ud[:, sel] = np.vstack([u, du, d2u, d3u])[:, :n]
+        th[sel] = ith[:n]
+        if not last:   # advance the modal states and theta to the next knot
+            x, theta_k = xm[:, -1], float(ith[-1])
+    return poles, res, xs, ud, th
+
+
 def response(profile: Profile, t: np.ndarray, bandwidth: float, tau: float = 0.0,
              gain: float = 1.0) -> TrackingResponse:
     """The loop's exact response at the times t [s] (any order), scaled by ``gain``."""
     t = np.asarray(t, dtype=float)
-    knots, coef = _segments(profile)
-    poles, res = loop_modes(bandwidth, tau)
-    w0 = profile.omegas[0]
-    seg = np.searchsorted(knots, t, side="right") - 1       # -1: before the first knot
-    th = np.zeros(t.shape)
-    w = np.zeros(t.shape, dtype=complex)
-    a = np.zeros(t.shape, dtype=complex)
-    ref = np.full(t.shape, float(w0))
-    pre = seg < 0                                            # steady state at w0
-    th[pre] = w0 * (t[pre] - knots[0])
-    w[pre], a[pre] = w0, 0.0
-    x = -w0 / poles                                          # modal states at the knot
-    theta_k = 0.0
-    for k in range(len(coef)):
-        c0, c1, c2, c3 = coef[k]
-        sel = seg == k
-        end = knots[k + 1] - knots[k] if k + 1 < len(knots) else None
-        for v, idx in ((t[sel] - knots[k], sel), (None if end is None else np.array([end]),
-                                                  None)):
-            if v is None:
-                continue
-            u = c0 + v * (c1 + v * (c2 + v * c3))
-            du = c1 + v * (2 * c2 + 3 * c3 * v)
-            d2u = 2 * c2 + 6 * c3 * v
-            d3u = 6 * c3 + 0 * v
-            big_u = v * (c0 + v * (c1 / 2 + v * (c2 / 3 + v * c3 / 4)))
-            p = poles[:, None]
-            xp = -(u / p + du / p**2 + d2u / p**3 + d3u / p**4)
-            xp0 = -(c0 / p + c1 / p**2 + 2 * c2 / p**3 + 6 * c3 / p**4)
-            e = np.exp(p * v)
-            xm = xp + (x[:, None] - xp0) * e
-            ixp = -(big_u / p + (u - c0) / p**2 + (du - c1) / p**3 + (d2u - 2 * c2) / p**4)
-            ix = ixp + (x[:, None] - xp0) * np.expm1(p * v) / p
-            r = res[:, None]
-            if idx is not None:
-                w[idx] = np.sum(r * xm, axis=0)
-                a[idx] = np.sum(r * (p * xm + u), axis=0)
-                th[idx] = theta_k + np.sum(r * ix, axis=0).real
-                ref[idx] = u
-            else:   # advance the modal states and theta to the next knot
-                theta_k += float(np.sum(r * ix, axis=0).real[0])
-                x = xm[:, 0]
-    return TrackingResponse(gain * th, gain * w.real, gain * a.real, ref)
+    poles, res, xs, ud, th = _modal(profile, t, bandwidth, tau)
+    p, r = poles[:, None], res[:, None]
+    w = np.sum(r * xs, axis=0).real
+    a = np.sum(r * (p * xs + ud[0]), axis=0).real
+    return TrackingResponse(gain * th, gain * w, gain * a, ud[0])
+
+
+def alpha_derivatives(profile: Profile, t: np.ndarray, bandwidth: float, tau: float = 0.0,
+                      order: int = 3) -> np.ndarray:
+    """alpha and its time derivatives up to ``order`` at t: rows alpha, alpha', ... [rad/s^2,
+    rad/s^3, ...]. From x_i' = p_i x_i + u: d^k x_i = p^k x_i + sum_j p^(k-1-j) u^(j), so
+    alpha^(k) = sum_i r_i (p_i^(k+1) x_i + sum_{j<=k} p_i^(k-j) u^(j)); u^(j) = 0 for j > 3
+    (a cubic segment; the spline's third derivative jumps at the knots)."""
+    t = np.asarray(t, dtype=float)
+    poles, res, xs, ud, _ = _modal(profile, t, bandwidth, tau)
+    p, r = poles[:, None], res[:, None]
+    out = np.empty((order + 1, t.size))
+    for k in range(order + 1):
+        acc = p ** (k + 1) * xs
+        for j in range(min(k, 3) + 1):
+            acc = acc + p ** (k - j) * ud[j]
+        out[k] = np.sum(r * acc, axis=0).real
+    return out
 
 
 def reference(profile: Profile, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -119,4 +154,4 @@ def reference(profile: Profile, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, du
 
 
-__all__ = ["TrackingResponse", "loop_modes", "response", "reference"]
+__all__ = ["TrackingResponse", "loop_modes", "response", "reference", "alpha_derivatives"]

@@ -13,6 +13,7 @@ from scipy.interpolate import CubicSpline
 
 from abu.cli.main import main as abu_main
 from abu_model.tracking_response import reference, response
+from abu_model.params import BallParams
 from controller.drive import Drive, DriveFileError, drive_from_dict
 from controller.profile import Profile, ProfileFileError, profile_from_dict
 from measurement.kinematics.drive_model import DriveModelSettings
@@ -292,3 +293,38 @@ def test_tracking_options_refused_by_name(tmp_path, capsys, argv, option):
     err = capsys.readouterr().err
     assert option in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------------------ co-simulation
+@pytest.mark.parametrize("mu, tau", [(0.012, 0.005), (0.02, 0.0)])
+def test_cosimulated_tracking_drive_slips_where_the_exact_mu_req_reaches_mu(mu, tau, fmu_dir):
+    """abu simulate --motion profile's experiment: the rotor follows the loop's exact motion
+    (1e-5 rad/s), the ball slips where mu_req of that motion first reaches mu (within 2e-6 s:
+    the check's grid), and mu_low = mu_high = mu (continuous acceleration)."""
+    from abu_model.params import PlantParams
+    from harness.experiments.profile_run import ProfileExperiment, run_profile
+    drive = Drive(model="tracking", bandwidth=150.0, tau_motor=tau)
+    plant = PlantParams(BallParams(mu=mu, mu_d=0.8 * mu), tau_motor=tau)
+    res = run_profile(ProfileExperiment(plant, drive, PROFILE, t_end=0.45), fmu_dir=fmu_dir)
+    s = res.summary
+    assert s["max_omega_error_rad_s"] < 1e-5
+    t = np.arange(0.0, 0.45, 1e-6)
+    r = response(PROFILE, t, 150.0, tau)
+    q = BallParams().lever_ratio * np.abs(r.alpha) / r.omega**2
+    t_cross = t[np.argmax(q >= mu)]
+    assert s["t_slip"] == pytest.approx(t_cross, abs=2e-6)
+    assert s["mu_low"] == pytest.approx(mu, rel=1e-6) and s["mu_high"] == pytest.approx(mu,
+                                                                                        rel=1e-6)
+
+
+def test_simulate_profile_command(tmp_path, capsys, fmu_dir):
+    drive = tmp_path / "drive.json"
+    drive.write_text(json.dumps(TRACKING))
+    prof = tmp_path / "profile.json"
+    prof.write_text(json.dumps(PROFILE.to_dict()))
+    folder = str(next(iter(fmu_dir.values())).parent)
+    assert abu_main(["simulate", "--motion", "profile", "--drive", str(drive), "--profile",
+                     str(prof), "--mu", "0.015", "--fmu-dir", folder, "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["experiment"]["motion"] == "profile" and s["slips"]
+    assert s["mu_estimate"] == pytest.approx(0.015, rel=1e-6)

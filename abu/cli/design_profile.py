@@ -7,6 +7,7 @@ Dispatched from :func:`abu.cli.plan.cmd_design` when the drive is of model ``tra
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 import math
@@ -75,7 +76,10 @@ def cmd_design_profile(args: argparse.Namespace, drive) -> int:
     from abu.cli.common import refuse_given
     from controller.profile import dumps_profile
     from harness.planning.design_profile import design_profile
-    from abu.cli.plan import _dumps
+    from harness.experiments.results_io import to_jsonable
+
+    def _dumps(obj) -> str:
+        return json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n"
 
     refuse_given(args, STAIRCASE_ONLY, "with a tracking --drive (they set up a staircase)")
     design = design_profile(profile_spec(args, drive))

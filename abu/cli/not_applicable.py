@@ -39,7 +39,13 @@ RULES: tuple[Rule, ...] = (
      "with --motion ramp (the ramp prescribes the torque: no staircase, no speed controller)"),
     ("simulate", lambda a: a.motion == "staircase", ("--jerk",),
      "with --motion staircase (--jerk is the ramp's; use --motion ramp)"),
-    ("simulate", lambda a: bool(a.drive), _DRIVE_SETS,
+    ("simulate", lambda a: a.motion != "profile", ("--profile",),
+     "without --motion profile (the profile is the tracking drive's reference)"),
+    ("simulate", lambda a: a.motion == "profile", _STAIRCASE + (
+        "--omega0-hz", "--theta-ref", "--zeta", "--omega-n", "--jerk", "--tol", "--tau-motor"),
+     "with --motion profile (the drive.json and profile.json set the motion; the tracking "
+     "loop is modelled exactly at fixed communication steps)"),
+    ("simulate", lambda a: bool(a.drive) and a.motion != "profile", _DRIVE_SETS,
      "with --drive (the drive.json sets zeta, omega_n and tau_motor)"),
     ("simulate", lambda a: a.tol is not None, ("--comm-step",),
      "with --tol (--tol chooses the communication steps by error control; give one of them)"),

@@ -38,6 +38,16 @@ GAIN_RANGE = (0.5, 2.0)
 #: of bench_profile_drive: fitted bandwidth, lag, gain and offset all at the truth, refused at
 #: 2 ms only); a wrong loop or a torque ripple shows over 8 ms and longer.
 BLOCKS_S = (0.008, 0.032, 0.128)
+#: Largest accepted residual rms / tracking noise: the tracker's noise estimate (from the
+#: shortest differences) is low when its noise is correlated over a few frames (seed 107 of
+#: bench_profile_drive: 1.2504 with every parameter at the truth and white blocks); the
+#: covariance is scaled up by this ratio either way.
+MAX_RMS_RATIO = 1.5
+
+
+def profile_settings(**changes) -> DriveModelSettings:
+    """The profile fit's default settings (:class:`DriveModelSettings` with MAX_RMS_RATIO)."""
+    return DriveModelSettings(**{"max_rms_ratio": MAX_RMS_RATIO, **changes})
 Z95 = 1.959964
 
 
@@ -78,7 +88,7 @@ def fit_profile_model(time: np.ndarray, theta: np.ndarray, drive: Drive, profile
                       sigma_theta: float | None = None,
                       settings: DriveModelSettings | None = None) -> DriveFit:
     """Fit the known profile through the known loop to theta(t) (see the module doc)."""
-    st = settings or DriveModelSettings()
+    st = settings or profile_settings()
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
     sample_interval(t)
@@ -103,7 +113,7 @@ class ProfileModelInput:
 
     drive: Drive
     profile: Profile
-    settings: DriveModelSettings = field(default_factory=DriveModelSettings)
+    settings: DriveModelSettings = field(default_factory=profile_settings)
     #: the fit's linear basis holds theta's harmonics 1-3 (the camera's fixed pattern: lens,
     #: eccentric axis), so a lens harmonic does not pass into omega_dot: the analysis drops
     #: its lens prior (``theta_harmonic_rad``) for these kinematics (measured:
