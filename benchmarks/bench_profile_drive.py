@@ -11,7 +11,8 @@ track``) and analysed three ways:
 * ``profile model``: ``abu measure --kinematics drive-model --profile`` (the default fit);
 * ``profile model, exact loop``: the same with the true bandwidth as the stated value and a
   tight interval (what a perfectly identified drive gives);
-* ``exact kinematics``: omega, omega_dot replaced by the plant's (an oracle): the width the
+* ``exact kinematics``: omega, omega_dot replaced by the plant's (an oracle), with the
+  default lens prior on theta's harmonic; ``exact, no lens prior``: without it, the width the
   beta data allow.
 
 Printed per analysis: coverage (both bounds finite and holding mu), misses by more than 2 %
@@ -44,6 +45,7 @@ from harness.planning.design_profile import ProfileDesignSpec, design_profile  #
 from measurement.imaging.tracks_io import read_tracks_csv  # noqa: E402
 from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
+from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from measurement.kinematics.profile_model import ProfileModelInput  # noqa: E402
 from twin.scenario import render_scenario_frames, simulate_scenario  # noqa: E402
 from twin.tracking_scenario import tracking_scenario, tracking_spec  # noqa: E402
@@ -89,7 +91,8 @@ def one(seed: int, design, cache: Path | None = None) -> dict:
     mu_d = mu * float(rng.uniform(0.6, 1.0))
     wb = BANDWIDTH * float(rng.uniform(0.95, 1.05))
     key = None if cache is None else cache / (
-        f"s{seed}_{lo:g}_{hi:g}_{design.spec.sweep}_{design.spec.speed_max:.4g}.npz")
+        f"s{seed}_{lo:g}_{hi:g}_{design.spec.sweep}_{design.spec.speed_max:.4g}"
+        f"_{design.rate:.6g}.npz")
     if key is not None and key.exists():
         z = np.load(key)
         tracks = SimpleNamespace(time=z["time"], x=z["x"], y=z["y"], lost=z["lost"])
@@ -106,14 +109,18 @@ def one(seed: int, design, cache: Path | None = None) -> dict:
     exact_drive = Drive(model="tracking", bandwidth=wb, tau_motor=TAU,
                         ci95={"bandwidth_rad_s": (wb * 0.999, wb * 1.001)})
     row = {"seed": seed, "mu": mu, "mu_d_over_mu": mu_d / mu, "bounds": {},
-           "predicted": float(np.interp(mu, design.mus, design.width))}
+           "predicted": float(np.interp(mu, design.mus, design.width)),
+           "speed_rad_s": float(np.interp(mu, design.mus, design.speed)),
+           "sweep_rate_per_s": design.rate}
     for name, opt, exact in (
             ("profile model", AnalysisOptions(kinematics="drive-model", drive_model=ProfileModelInput(
                 DRIVE, design.profile)), False),
             ("profile model, exact loop", AnalysisOptions(
                 kinematics="drive-model", drive_model=ProfileModelInput(exact_drive,
                                                                         design.profile)), False),
-            ("exact kinematics", AnalysisOptions(), True)):
+            ("exact kinematics", AnalysisOptions(), True),
+            ("exact, no lens prior", AnalysisOptions(
+                inference=InferenceOptions(theta_harmonic_rad=0.0)), True)):
         analysis._kinematics = _exact(state) if exact else MEASURED
         try:
             _, s = analyse_tracks(tracks.time, tracks.x, tracks.y, l=l_m, d=d_m,
@@ -121,6 +128,8 @@ def one(seed: int, design, cache: Path | None = None) -> dict:
         finally:
             analysis._kinematics = MEASURED
         row["bounds"][name] = (s["mu_low"], s["mu_high"], s["estimator"].get("model"))
+        if s["estimator"].get("model") == "refused":
+            row.setdefault("why", {})[name] = s["estimator"].get("why", "")
     return row
 
 
@@ -146,6 +155,9 @@ def report(rows: list[dict]) -> None:
               f"{finite}), misses > 2 %: {len(miss2)} {miss2[:5]}, width median "
               f"{100 * np.median(w):.1f} %, 90th {100 * np.percentile(w, 90):.1f} %"
               + (f", model refused {refused}" if refused else ""))
+    whys = [(r["seed"], w[:70]) for r in ok for w in r.get("why", {}).values()]
+    if whys:
+        print(f"  refusals: {whys[:6]}")
     meas = np.array([(r["bounds"]["profile model"][1] - r["bounds"]["profile model"][0])
                      / r["mu"] if r["bounds"]["profile model"][0] is not None
                      and r["bounds"]["profile model"][1] is not None else np.nan for r in ok])
@@ -162,6 +174,7 @@ def main() -> None:
     ap.add_argument("--speed-max-hz", type=float, default=40.0)
     ap.add_argument("--sweep", choices=["decelerate", "accelerate"], default="decelerate")
     ap.add_argument("--cache", default=None, help="keep the tracks here and reuse them")
+    ap.add_argument("--rows", default=None, help="also write the rows as JSON here")
     a = ap.parse_args()
     designs = []
     for lo, hi in RANGES:
@@ -188,6 +201,9 @@ def main() -> None:
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in RANGES)}, sweep {a.sweep}, speed cap "
           f"{a.speed_max_hz:g} Hz (CPU {time.process_time() - c0:.0f} s; shared machine)")
     report(rows)
+    if a.rows:
+        import json
+        Path(a.rows).write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":
