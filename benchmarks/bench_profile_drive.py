@@ -83,16 +83,18 @@ def _render_and_track(seed: int, design, mu: float, mu_d: float, wb: float):
         return read_tracks_csv(Path(tmp) / "t" / "tracks.csv"), state, scn
 
 
-def one(seed: int, design, cache: Path | None = None) -> dict:
+def one(seed: int, design, cache: Path | None = None, mu_d_ratio: float | None = None) -> dict:
     """Render, track and measure one designed run (tracks reused from ``cache`` if there)."""
     rng = np.random.default_rng([seed, 18])
     lo, hi = design.spec.mu_lo, design.spec.mu_hi
     mu = float(rng.uniform(lo, hi))
     mu_d = mu * float(rng.uniform(0.6, 1.0))
+    if mu_d_ratio is not None:
+        mu_d = mu * mu_d_ratio
     wb = BANDWIDTH * float(rng.uniform(0.95, 1.05))
     key = None if cache is None else cache / (
         f"s{seed}_{lo:g}_{hi:g}_{design.spec.sweep}_{design.spec.speed_max:.4g}"
-        f"_{design.rate:.6g}.npz")
+        f"_{design.rate:.6g}{'' if mu_d_ratio is None else f'_mud{mu_d_ratio:g}'}.npz")
     if key is not None and key.exists():
         z = np.load(key)
         tracks = SimpleNamespace(time=z["time"], x=z["x"], y=z["y"], lost=z["lost"])
@@ -175,6 +177,8 @@ def main() -> None:
     ap.add_argument("--sweep", choices=["decelerate", "accelerate"], default="decelerate")
     ap.add_argument("--cache", default=None, help="keep the tracks here and reuse them")
     ap.add_argument("--rows", default=None, help="also write the rows as JSON here")
+    ap.add_argument("--mu-d-ratio", type=float, default=None,
+                    help="mu_d / mu of every run (default: drawn in [0.6, 1])")
     a = ap.parse_args()
     designs = []
     for lo, hi in RANGES:
@@ -192,14 +196,16 @@ def main() -> None:
         cache = None if a.cache is None else Path(a.cache)
         if cache is not None:
             cache.mkdir(parents=True, exist_ok=True)
-        rows.append(one(seed, designs[k % len(designs)], cache))
+        rows.append(one(seed, designs[k % len(designs)], cache, a.mu_d_ratio))
         r = rows[-1]
         print(f"  seed {seed}: mu {r['mu']:.4g} " + " | ".join(
             f"{lo if lo is None else round(lo, 5)}..{hi if hi is None else round(hi, 5)} {m}"
             for lo, hi, m in r.get("bounds", {}).values()), flush=True)
+    ratio = "in [0.6, 1]" if a.mu_d_ratio is None else f"{a.mu_d_ratio:g}"
     print(f"prescribed-profile drive, seeds {a.first}..{a.first + a.n - 1}, ranges "
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in RANGES)}, sweep {a.sweep}, speed cap "
-          f"{a.speed_max_hz:g} Hz (CPU {time.process_time() - c0:.0f} s; shared machine)")
+          f"{a.speed_max_hz:g} Hz, mu_d / mu {ratio} (CPU {time.process_time() - c0:.0f} s; "
+          "shared machine)")
     report(rows)
     if a.rows:
         import json
