@@ -50,7 +50,8 @@ def apply_drive_to_args(args: argparse.Namespace) -> None:
         return
     if drive.is_tracking:
         raise ParameterError("--drive", args.drive, "a PI drive for a staircase (this one is a "
-                             "tracking drive: give its profile with --profile profile.json)")
+                             "tracking drive, which follows a profile: 'abu simulate --motion "
+                             "profile' and 'abu render' take it with --profile profile.json)")
     if abs(drive.setpoint_weight - 1.0) > 1e-9:
         raise ParameterError("--drive", args.drive, "a drive without setpoint weighting "
                              f"(setpoint_weight 1, this one {drive.setpoint_weight:.4g}): the "
