@@ -112,6 +112,7 @@ def one(seed: int, design, cache: Path | None = None, mu_d_ratio: float | None =
                         ci95={"bandwidth_rad_s": (wb * 0.999, wb * 1.001)})
     row = {"seed": seed, "mu": mu, "mu_d_over_mu": mu_d / mu, "bounds": {},
            "predicted": float(np.interp(mu, design.mus, design.width)),
+           "predicted_upper": float(np.interp(mu, design.mus, design.upper())),
            "speed_rad_s": float(np.interp(mu, design.mus, design.speed)),
            "sweep_rate_per_s": design.rate}
     for name, opt, exact in (
@@ -165,8 +166,12 @@ def report(rows: list[dict]) -> None:
                      and r["bounds"]["profile model"][1] is not None else np.nan for r in ok])
     pred = np.array([r["predicted"] for r in ok])
     ratio = meas / pred
+    inside = np.mean((ratio >= 0.77) & (ratio <= 1.3))
+    upper = np.array([r["predicted_upper"] for r in ok])
     print(f"  measured / predicted width (profile model): median {np.nanmedian(ratio):.2f}, "
-          f"10-90 % {np.nanpercentile(ratio, 10):.2f}-{np.nanpercentile(ratio, 90):.2f}")
+          f"10-90 % {np.nanpercentile(ratio, 10):.2f}-{np.nanpercentile(ratio, 90):.2f}, within "
+          f"[0.77, 1.3] {100 * inside:.0f} %; measured <= the upper prediction (mu_d = mu) "
+          f"{int(np.sum(meas <= upper))} of {len(ok)}")
 
 
 def main() -> None:

@@ -64,13 +64,18 @@ def describe(design) -> str:
              f"{ph['speed_start_rad_s'] / HZ:.3g} Hz -> {ph['speed_end_rad_s'] / HZ:.3g} Hz "
              f"(cap {s.speed_cap() / HZ:.3g} Hz: --speed-max-hz and the ball's blur); "
              f"{len(design.profile.times)} knots",
-             f"  {'mu [-]':>10} {'t_slip [s]':>10} {'speed [Hz]':>10} {'width [%]':>9}"]
+             f"  {'mu [-]':>10} {'t_slip [s]':>10} {'speed [Hz]':>10} {'width [%]':>9} "
+             f"{'upper [%]':>9}"]
+    upper = design.upper()
     for k in range(0, design.mus.size, 2):
         lines.append(f"  {design.mus[k]:>10.4g} {design.t_slip[k]:>10.4f} "
-                     f"{design.speed[k] / HZ:>10.3g} {100 * design.width[k]:>9.1f}")
+                     f"{design.speed[k] / HZ:>10.3g} {100 * design.width[k]:>9.1f} "
+                     f"{100 * upper[k]:>9.1f}")
     lines.append(f"  predicted relative width: median {100 * float(np.median(design.width)):.1f} %, "
-                 f"worst {100 * float(design.width.max()):.1f} % (no co-simulation check: the "
-                 "FMUs follow staircases)")
+                 f"worst {100 * float(design.width.max()):.1f} % (mu_d = 0.8 mu); upper "
+                 f"{100 * float(upper.max()):.1f} % (mu_d = mu: the slowest onset)")
+    lines.append("  check it: abu simulate --motion profile --drive DRIVE --profile profile.json "
+                 "--mu MU")
     lines.append("  abu render --drive DRIVE --profile profile.json --mu MU --out REC")
     lines.append("  abu measure REC/frames.tif --kinematics drive-model --drive DRIVE "
                  "--profile profile.json --out M")
