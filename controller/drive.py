@@ -7,7 +7,7 @@ standard library (it may be vendored into an FMU), except the shared error type 
 The file is one JSON object (SI units, the unit in each key)::
 
     {"kind": "abu-drive", "format_version": 1,
-     "model": "second-order" | "pi-lag" | "pi-lag-weighted",
+     "model": "second-order" | "pi-lag" | "pi-lag-weighted" | "tracking",
      "theta_ref_mode": "integral",
      "zeta": 0.7, "omega_n_rad_s": 12.0, "tau_motor_s": 0.02, "setpoint_weight": 1.0,
      "zeta_ci95": [lo, hi], "omega_n_rad_s_ci95": [lo, hi], ...   (optional)
@@ -22,6 +22,17 @@ on the proportional part:
     w / w_ref = (2 zeta wn b s + wn^2) / (tau_motor s^3 + s^2 + 2 zeta wn s + wn^2).
 
 ``second-order`` has tau_motor = 0 and b = 1 (the report's model), ``pi-lag`` b = 1.
+
+``tracking`` is the drive the report's chapter 6 recommends: a loop that follows a prescribed
+smooth speed trajectory omega_p(t) (``profile.json``, :mod:`controller.profile`) with a known
+bandwidth wb [rad/s] (``bandwidth_rad_s``, required; ``bandwidth_rad_s_ci95`` optional) and the
+same torque lag (``tau_motor_s``, default 0)::
+
+    T_cmd = J wb (w_p - w),  tau_motor T' = T_cmd - T,  J w' = T,
+    w / w_p = wb / (tau_motor s^2 + s + wb)      (tau_motor = 0: first order, -3 dB at wb)
+
+``zeta``, ``omega_n_rad_s`` and ``setpoint_weight`` are not fields of a tracking drive (refused
+by name), nor ``bandwidth_rad_s`` of the PI models.
 """
 from __future__ import annotations
 
@@ -40,14 +51,20 @@ except ImportError:  # pragma: no cover - only without abu_model
 
 KIND = "abu-drive"
 VERSION = 1
-MODELS = ("second-order", "pi-lag", "pi-lag-weighted")
+MODELS = ("second-order", "pi-lag", "pi-lag-weighted", "tracking")
+PI_MODELS = MODELS[:3]
 #: Fitted parameters of each model (names as in the file).
 MODEL_PARAMETERS: dict[str, tuple[str, ...]] = {
     "second-order": ("zeta", "omega_n_rad_s"),
     "pi-lag": ("zeta", "omega_n_rad_s", "tau_motor_s"),
     "pi-lag-weighted": ("zeta", "omega_n_rad_s", "tau_motor_s", "setpoint_weight"),
+    "tracking": ("bandwidth_rad_s", "tau_motor_s"),
 }
-UNITS = {"zeta": "1", "omega_n_rad_s": "rad/s", "tau_motor_s": "s", "setpoint_weight": "1"}
+UNITS = {"zeta": "1", "omega_n_rad_s": "rad/s", "tau_motor_s": "s", "setpoint_weight": "1",
+         "bandwidth_rad_s": "rad/s"}
+#: Fields of a PI drive that a tracking drive must not carry, and the reverse.
+PI_ONLY = ("zeta", "omega_n_rad_s", "setpoint_weight")
+TRACKING_ONLY = ("bandwidth_rad_s",)
 
 
 class DriveFileError(_Base):  # type: ignore[misc,valid-type]
@@ -69,6 +86,7 @@ class Drive:
         omega_n: natural frequency of the PI loop [rad/s] (> 0).
         tau_motor: torque lag [s] (>= 0; 0 for ``second-order``).
         setpoint_weight: b, weight of the setpoint in the proportional part [-] (> 0).
+        bandwidth: ``tracking`` only: the loop's bandwidth wb [rad/s] (> 0; None otherwise).
         ci95: parameter name (file name, e.g. ``omega_n_rad_s``) -> (low, high) 95 % interval.
         fit: informative fit data (residual check, sizes); not validated.
         source: where the drive came from (a path or a description).
@@ -79,6 +97,7 @@ class Drive:
     omega_n: float = 2.2
     tau_motor: float = 0.0
     setpoint_weight: float = 1.0
+    bandwidth: float | None = None
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
     fit: dict[str, Any] = field(default_factory=dict)
     source: str = "default"
@@ -96,6 +115,16 @@ class Drive:
             raise DriveFileError(src, "must be 0 for the second-order model", "tau_motor_s")
         if self.model != "pi-lag-weighted" and self.setpoint_weight != 1.0:
             raise DriveFileError(src, f"must be 1 for the {self.model} model", "setpoint_weight")
+        if self.model == "tracking":
+            _check_number(src, "bandwidth_rad_s", self.bandwidth, 0.0, strict=True)
+        elif self.bandwidth is not None:
+            raise DriveFileError(src, f"not a parameter of the {self.model} model (only of "
+                                 "'tracking')", "bandwidth_rad_s")
+
+    @property
+    def is_tracking(self) -> bool:
+        """A drive that tracks a prescribed profile (``profile.json``), not a staircase."""
+        return self.model == "tracking"
 
     @property
     def theta_ref_mode(self) -> str:
@@ -105,17 +134,20 @@ class Drive:
     def value(self, name: str) -> float:
         """Parameter by its file name (``zeta``, ``omega_n_rad_s``, ...)."""
         return {"zeta": self.zeta, "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
-                "setpoint_weight": self.setpoint_weight}[name]
+                "setpoint_weight": self.setpoint_weight, "bandwidth_rad_s": self.bandwidth}[name]
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of the file (see the module docstring)."""
-        out: dict[str, Any] = {"kind": KIND, "format_version": VERSION, "model": self.model,
-                               "theta_ref_mode": self.theta_ref_mode, "zeta": self.zeta,
-                               "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
-                               "setpoint_weight": self.setpoint_weight}
+        out: dict[str, Any] = {"kind": KIND, "format_version": VERSION, "model": self.model}
+        if self.is_tracking:
+            out.update(bandwidth_rad_s=self.bandwidth, tau_motor_s=self.tau_motor)
+        else:
+            out.update(theta_ref_mode=self.theta_ref_mode, zeta=self.zeta,
+                       omega_n_rad_s=self.omega_n, tau_motor_s=self.tau_motor,
+                       setpoint_weight=self.setpoint_weight)
         for name, (lo, hi) in self.ci95.items():
             out[f"{name}_ci95"] = [lo, hi]
-        out["units"] = dict(UNITS)
+        out["units"] = {k: v for k, v in UNITS.items() if k in out}
         if self.fit:
             out["fit"] = self.fit
         out["source"] = self.source
@@ -124,7 +156,8 @@ class Drive:
 
 #: Largest plausible value of each parameter (zeta [-], omega_n [rad/s], tau_motor [s], b [-]):
 #: a damping ratio, the natural frequency of a CD drive's speed loop, a motor's torque lag.
-UPPER = {"zeta": 1000.0, "omega_n_rad_s": 1.0e4, "tau_motor_s": 1.0, "setpoint_weight": 100.0}
+UPPER = {"zeta": 1000.0, "omega_n_rad_s": 1.0e4, "tau_motor_s": 1.0, "setpoint_weight": 100.0,
+         "bandwidth_rad_s": 1.0e5}
 
 
 def _check_number(source: str, name: str, value: Any, low: float, strict: bool) -> float:
@@ -154,6 +187,11 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
     if model not in MODELS:
         raise DriveFileError(source, f"expected one of {', '.join(MODELS)}, got {model!r}",
                              "model")
+    if model == "tracking":
+        return _tracking_from_dict(obj, source)
+    if "bandwidth_rad_s" in obj:
+        raise DriveFileError(source, f"not a parameter of the {model} model (only of "
+                                     "'tracking')", "bandwidth_rad_s")
     mode = obj.get("theta_ref_mode", "integral")
     if mode != "integral":
         raise DriveFileError(source, f"expected 'integral', got {mode!r}", "theta_ref_mode")
@@ -165,6 +203,16 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
                ("setpoint_weight", 1.0))}
     for name, value in values.items():
         _check_number(source, name, value, 0.0, strict=name != "tau_motor_s")
+    ci95 = _intervals(obj, model, source)
+    fit = obj.get("fit") or {}
+    return Drive(model=model, zeta=float(values["zeta"]),
+                 omega_n=float(values["omega_n_rad_s"]), tau_motor=float(values["tau_motor_s"]),
+                 setpoint_weight=float(values["setpoint_weight"]), ci95=ci95,
+                 fit=fit if isinstance(fit, dict) else {}, source=source)
+
+
+def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, float]]:
+    """The ``<name>_ci95`` pairs of the model's parameters (checked when present)."""
     ci95: dict[str, tuple[float, float]] = {}
     for name in MODEL_PARAMETERS[model]:
         key = f"{name}_ci95"
@@ -176,10 +224,23 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
                 raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
                                      key)
             ci95[name] = (float(pair[0]), float(pair[1]))
+    return ci95
+
+
+def _tracking_from_dict(obj: dict, source: str) -> Drive:
+    """A ``tracking`` drive: bandwidth required, tau_motor optional, no PI fields."""
+    for name in PI_ONLY + tuple(f"{n}_ci95" for n in PI_ONLY) + ("theta_ref_mode",):
+        if name in obj:
+            raise DriveFileError(source, "not a parameter of the tracking model (its loop is "
+                                         "bandwidth_rad_s and tau_motor_s)", name)
+    if "bandwidth_rad_s" not in obj:
+        raise DriveFileError(source, "missing (the tracking loop's bandwidth [rad/s])",
+                             "bandwidth_rad_s")
+    wb = _check_number(source, "bandwidth_rad_s", obj["bandwidth_rad_s"], 0.0, strict=True)
+    tau = _check_number(source, "tau_motor_s", obj.get("tau_motor_s", 0.0), 0.0, strict=False)
+    ci95 = _intervals(obj, "tracking", source)
     fit = obj.get("fit") or {}
-    return Drive(model=model, zeta=float(values["zeta"]),
-                 omega_n=float(values["omega_n_rad_s"]), tau_motor=float(values["tau_motor_s"]),
-                 setpoint_weight=float(values["setpoint_weight"]), ci95=ci95,
+    return Drive(model="tracking", tau_motor=tau, bandwidth=wb, ci95=ci95,
                  fit=fit if isinstance(fit, dict) else {}, source=source)
 
 

@@ -12,7 +12,14 @@ Two kinds of drive, both a *digital* controller sampled at the camera's frame ra
   alpha_cmd(t) = s [a_base r(t) + sum_k A_k bump((t - t_k) / w_k)], s = sign(omega0);
   the torque is J alpha_cmd.
 
-Both pass through the plant's **torque lag** ``tau_motor`` (0-30 ms). The rotor does not feel
+* ``tracking``: the drive the report's chapter 6 recommends: a digital P law on the speed
+  error to a prescribed smooth profile omega_p(t) (:mod:`controller.profile`, knots
+  ``profile_t`` / ``profile_w``), T = J wb (omega_p - w), so that the continuous loop is
+  w / w_p = wb / (tau_motor s^2 + s + wb) (``drive.json`` model ``tracking``); being digital at
+  the frame rate it is not exactly that loop (the measurement fits the difference as a
+  time offset).
+
+All pass through the plant's **torque lag** ``tau_motor`` (0-30 ms). The rotor does not feel
 the ball (the report's model, ``ball_reaction`` off), so :func:`rotor_mu_req` can predict
 mu_req(t) with the ball stuck from the rotor alone (closed form per sample, the same formulas as
 the plant's stick branch); :mod:`twin.scenario` uses it to place the slip inside the
@@ -30,7 +37,7 @@ from abu_model.errors import ParameterError
 from abu_model.params import DEFAULT_J_ABU, BallParams, PlantParams, check_finite, \
     check_nonnegative, check_positive
 
-KINDS = ("staircase_pi", "profile")
+KINDS = ("staircase_pi", "profile", "tracking")
 TWO_PI = 2.0 * math.pi
 
 
@@ -50,6 +57,9 @@ class DriveSpec:
         bumps: ``profile``: ((t_k [s], half-width w_k [s], amplitude A_k [rad/s^2]), ...).
         base_accel: ``profile``: base acceleration magnitude [rad/s^2] reached by a smooth
             ramp between ``base_t0`` and ``base_t0 + base_rise`` [s].
+        bandwidth: ``tracking``: the loop's bandwidth wb [rad/s].
+        profile_t, profile_w: ``tracking``: the profile's knots [s], [rad/s] (omega0 must be
+            profile_w[0]).
     """
 
     kind: str = "staircase_pi"
@@ -68,6 +78,9 @@ class DriveSpec:
     base_accel: float = 0.0
     base_t0: float = 0.0
     base_rise: float = 0.1
+    bandwidth: float = 150.0
+    profile_t: tuple = ()
+    profile_w: tuple = ()
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -83,10 +96,25 @@ class DriveSpec:
             check_positive(name, getattr(self, name), unit)
         if self.rounding not in ("lead", "nearest", "trail"):
             raise ParameterError("rounding", self.rounding, "lead, nearest or trail")
+        if self.kind == "tracking":
+            check_positive("bandwidth", self.bandwidth, "rad/s")
+            from controller.profile import ProfileFileError
+            try:
+                self.profile()
+            except ProfileFileError as exc:
+                raise ParameterError("profile", "knots", str(exc)) from None
+            if self.omega0 != self.profile_w[0]:
+                raise ParameterError("omega0", self.omega0, "the profile's first speed "
+                                     f"{self.profile_w[0]!r} rad/s")
         for b in self.bumps:
             if len(b) != 3 or not all(math.isfinite(float(v)) for v in b) or b[1] <= 0:
                 raise ParameterError("bumps", b, "(time [s], half-width > 0 [s], amplitude "
                                      "[rad/s^2]) triples")
+
+    def profile(self):
+        """The ``tracking`` drive's profile (:class:`controller.profile.Profile`)."""
+        from controller.profile import Profile
+        return Profile(tuple(self.profile_t), tuple(self.profile_w), source="drive spec")
 
     def to_dict(self) -> dict:
         """Unit-suffixed plain dict (meta.json)."""
@@ -98,6 +126,9 @@ class DriveSpec:
                        t0_s=self.t0, te_s=self.te, step_rad_s=self.step, rounding=self.rounding,
                        zeta=self.zeta, omega_n_rad_s=self.omega_n,
                        setpoint_weight=self.setpoint_weight, setpoint_tau_s=self.setpoint_tau)
+        elif self.kind == "tracking":
+            out.update(bandwidth_rad_s=self.bandwidth, profile_time_s=list(self.profile_t),
+                       profile_omega_rad_s=list(self.profile_w))
         else:
             out.update(bumps=[{"t_s": b[0], "half_width_s": b[1], "amplitude_rad_s2": b[2]}
                               for b in d["bumps"]],
@@ -144,6 +175,11 @@ class _Controller:
         if spec.kind == "profile":  # prescribed: evaluated once on the whole sample grid
             self.a, self.da = profile_accel(spec, t_first + h * np.arange(n))
             self.a, self.da = (J * self.a).tolist(), (J * self.da).tolist()
+        elif spec.kind == "tracking":  # the reference is evaluated once on the sample grid
+            from abu_model.tracking_response import reference
+            wp, dwp = reference(spec.profile(), t_first + h * np.arange(n))
+            self.wp, self.dwp = wp.tolist(), dwp.tolist()
+            self.kp = J * spec.bandwidth
         else:
             from controller.reference import Staircase
 
@@ -165,6 +201,10 @@ class _Controller:
         sp = self.spec
         if sp.kind == "profile":
             return self.a[k], self.da[k], math.nan
+        if sp.kind == "tracking":   # P law on the speed error: T = J wb (w_p - w)
+            torque = self.kp * (self.wp[k] - omega)
+            alpha = (torque if applied is None else applied) / self.J
+            return torque, self.kp * (self.dwp[k] - alpha), self.wp[k]
         w_ref = float(self.stair.value(t))
         self.wf += self.filt * (w_ref - self.wf)
         dwf = (w_ref - self.wf) / sp.setpoint_tau if sp.setpoint_tau > 0 else 0.0

@@ -39,7 +39,13 @@ RULES: tuple[Rule, ...] = (
      "with --motion ramp (the ramp prescribes the torque: no staircase, no speed controller)"),
     ("simulate", lambda a: a.motion == "staircase", ("--jerk",),
      "with --motion staircase (--jerk is the ramp's; use --motion ramp)"),
-    ("simulate", lambda a: bool(a.drive), _DRIVE_SETS,
+    ("simulate", lambda a: a.motion != "profile", ("--profile",),
+     "without --motion profile (the profile is the tracking drive's reference)"),
+    ("simulate", lambda a: a.motion == "profile", _STAIRCASE + (
+        "--omega0-hz", "--theta-ref", "--zeta", "--omega-n", "--jerk", "--tol", "--tau-motor"),
+     "with --motion profile (the drive.json and profile.json set the motion; the tracking "
+     "loop is modelled exactly at fixed communication steps)"),
+    ("simulate", lambda a: bool(a.drive) and a.motion != "profile", _DRIVE_SETS,
      "with --drive (the drive.json sets zeta, omega_n and tau_motor)"),
     ("simulate", lambda a: a.tol is not None, ("--comm-step",),
      "with --tol (--tol chooses the communication steps by error control; give one of them)"),
@@ -51,7 +57,14 @@ RULES: tuple[Rule, ...] = (
     ("render", lambda a: a.scenario == "random", RENDER_REPORT_ONLY,
      "with --scenario random: it draws mu, the drive, the lighting, the optics and the sensor "
      "from --seed (only --seed, --size, --lighting, --frames and --calibration-views apply)"),
-    ("render", lambda a: a.scenario == "report", ("--size", "--lighting"),
+    ("render", lambda a: bool(a.profile), ("--omega0-hz", "--omega-end-hz", "--t0", "--te",
+                                           "--beta0", "--zeta", "--omega-n", "--tau-motor",
+                                           "--noise", "--gradient", "--ball-shift-px",
+                                           "--exposure-fraction", "--pixel-size", "--fmu-dir",
+                                           "--scenario", "--calibration-views"),
+     "with --profile (the tracking drive follows the profile; the camera is drawn from --seed: "
+     "only --mu, --seed, --frames, --fps, --size and --lighting apply)"),
+    ("render", lambda a: a.scenario == "report" and not a.profile, ("--size", "--lighting"),
      "with --scenario report (only --scenario random draws the frame size and the lighting)"),
     ("render", lambda a: a.scenario == "report" and bool(a.drive), _DRIVE_SETS,
      "with --drive (the drive.json sets zeta, omega_n and tau_motor)"),
@@ -68,8 +81,12 @@ RULES: tuple[Rule, ...] = (
      "with --no-harmonic (no lighting harmonic is fitted)"),
     ("measure", lambda a: a.mc_draws == 0, ("--seed",),
      "with --mc-draws 0 (the seed draws the Monte Carlo noise; give --mc-draws N)"),
-    ("measure", lambda a: a.kinematics != "drive-model", _STAIRCASE + ("--omega0-hz",),
-     "without --kinematics drive-model (the staircase serves only the drive model's fit)"),
+    ("measure", lambda a: a.kinematics != "drive-model", _STAIRCASE + ("--omega0-hz",
+                                                                       "--profile"),
+     "without --kinematics drive-model (the staircase or profile serves only the drive "
+     "model's fit)"),
+    ("measure", lambda a: bool(a.profile), _STAIRCASE + ("--omega0-hz",),
+     "with --profile (the tracking drive followed the profile, not a staircase)"),
     # identify
     ("identify", lambda a: a.pulses is None, ("--pulses-per-rev",),
      "without --pulses (it counts the pulses of --pulses)"),

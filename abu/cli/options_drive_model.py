@@ -1,8 +1,10 @@
-"""``abu measure --kinematics drive-model``: the staircase the recorded drive followed.
+"""``abu measure --kinematics drive-model``: the reference the recorded drive followed.
 
-The drive itself is ``--drive drive.json`` (``abu identify``); the staircase is given as in
-``abu simulate`` (``--omega0-hz --omega-end-hz --t0 --te --step-hz --rounding``), its times on
-the recording's clock (the fit adds a time offset within +- 50 ms for the camera's trigger).
+The drive itself is ``--drive drive.json`` (``abu identify``). A PI drive followed a staircase,
+given as in ``abu simulate`` (``--omega0-hz --omega-end-hz --t0 --te --step-hz --rounding``);
+a ``tracking`` drive followed a prescribed profile, ``--profile profile.json`` (``abu
+design``). Times are on the recording's clock (the fit adds a time offset within +- 50 ms for
+the camera's trigger).
 """
 from __future__ import annotations
 
@@ -21,6 +23,10 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
                         "from the --drive loop fitted to the whole record over the staircase "
                         "below (the estimator's where the fit is refused; summary.json "
                         "estimator.model says which and why)")
+    p.add_argument("--profile", default=None,
+                   help="profile.json ('abu design' for a tracking drive): the prescribed speed "
+                        "profile the --drive (model tracking) followed; with --kinematics "
+                        "drive-model, instead of the staircase options")
     g = p.add_argument_group("staircase of the drive (with --kinematics drive-model)")
     g.add_argument("--omega0-hz", type=float, default=None, help="initial speed [Hz]")
     g.add_argument("--omega-end-hz", type=float, default=None,
@@ -47,6 +53,9 @@ def drive_model_from_args(args: argparse.Namespace):
     if not args.drive:
         raise ParameterError("--drive", None, "a drive.json ('abu identify') with "
                              "--kinematics drive-model")
+    drive = load_drive(args.drive)
+    if args.profile or drive.is_tracking:
+        return _profile_input(args, drive)
     for opt, value in (("--omega0-hz", args.omega0_hz), ("--omega-end-hz", args.omega_end_hz),
                        ("--te", args.te)):
         if value is None or not math.isfinite(value):
@@ -65,4 +74,18 @@ def drive_model_from_args(args: argparse.Namespace):
                              "a speed of the same sign as --omega0-hz (the drive turns one way)")
     stair = Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0, args.te,
                       step=args.step_hz * HZ, rounding=args.rounding)
-    return DriveModelInput(load_drive(args.drive), as_setpoints(stair))
+    return DriveModelInput(drive, as_setpoints(stair))
+
+
+def _profile_input(args: argparse.Namespace, drive):
+    """The tracking drive and its profile (``--profile``); each mismatch named."""
+    from controller.profile import load_profile
+    from measurement.kinematics.profile_model import ProfileModelInput
+
+    if not drive.is_tracking:
+        raise ParameterError("--profile", args.profile, f"no profile with a {drive.model} drive "
+                             "(it follows a staircase); --drive must be of model 'tracking'")
+    if not args.profile:
+        raise ParameterError("--profile", None, "the profile.json the tracking drive of --drive "
+                             "followed ('abu design --drive ... --out plan' writes one)")
+    return ProfileModelInput(drive, load_profile(args.profile))

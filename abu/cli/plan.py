@@ -49,6 +49,10 @@ def apply_drive_to_args(args: argparse.Namespace) -> None:
     drive = load_drive_option(getattr(args, "drive", None))
     if drive is None:
         return
+    if drive.is_tracking:
+        raise ParameterError("--drive", args.drive, "a PI drive for a staircase (this one is a "
+                             "tracking drive, which follows a profile: 'abu simulate --motion "
+                             "profile' and 'abu render' take it with --profile profile.json)")
     if abs(drive.setpoint_weight - 1.0) > 1e-9:
         raise ParameterError("--drive", args.drive, "a drive without setpoint weighting "
                              f"(setpoint_weight 1, this one {drive.setpoint_weight:.4g}): the "
@@ -263,8 +267,12 @@ def cmd_design(args: argparse.Namespace) -> int:
     from harness.planning.design import design_staircase
     from harness.planning.design_check import check_design
 
+    drive = load_drive_option(args.drive)
+    if drive is not None and drive.is_tracking:   # the report's ch. 6 drive: a profile
+        from abu.cli.design_profile import cmd_design_profile
+        return cmd_design_profile(args, drive)
     lo, hi = (finite("--mu-range", v) for v in args.mu_range)
-    design = design_staircase(_spec(args, lo, hi))
+    design = design_staircase(_spec(args, lo, hi, drive))
     check = None if args.no_check else check_design(design, fmu_dir=args.fmu_dir)
     payload = {**design.as_dict(), "check": check}
     _write_design(args, payload, design, check, "design")
@@ -282,11 +290,16 @@ def cmd_next(args: argparse.Namespace) -> int:
     from abu.intervals_io import read_intervals
     from harness.planning.next_run import combine, propose_next
 
-    intervals = read_intervals(args.summaries)
-    drive = None
+    drive = load_drive_option(args.drive)
+    if drive is None or not drive.is_tracking:
+        intervals = read_intervals(args.summaries)
     if args.drive is None:  # a drive recorded by 'abu measure --drive'
         recorded = next((i["drive"] for i in intervals if i["drive"]), None)
         drive = None if recorded is None else drive_from_dict(recorded, "drive in a summary")
+    if drive is not None and drive.is_tracking:
+        raise ParameterError("--drive", args.drive or "drive in a summary", "a PI drive: 'abu "
+                             "next' plans staircases; for a tracking drive run 'abu design "
+                             "--mu-range LO HI' on the combined interval")
     lo, hi = combine(intervals)
     proposal = propose_next(intervals, _spec(args, lo, hi, drive))
     check = None if args.no_check else check_design(proposal.design, fmu_dir=args.fmu_dir)
@@ -349,7 +362,7 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
 
 def register(subparsers) -> None:
     """Add ``identify``, ``design`` and ``next`` to the ``abu`` subparsers."""
-    from controller.drive import MODELS
+    from controller.drive import PI_MODELS
 
     p = subparsers.add_parser(
         "identify", help="fit the closed speed loop from a record of its response",
@@ -371,7 +384,7 @@ def register(subparsers) -> None:
     g.add_argument("--te", type=float, default=1.0, help="duration of the inclined sine [s]")
     g.add_argument("--step-hz", type=float, default=1.0, help="setpoint resolution [Hz]")
     g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead")
-    p.add_argument("--model", choices=MODELS, default="pi-lag",
+    p.add_argument("--model", choices=PI_MODELS, default="pi-lag",
                    help="loop model (default pi-lag)")
     p.add_argument("--out", default=None, help="write drive.json and fit.png into this folder")
     p.add_argument("--no-plots", action="store_true", help="no fit.png")

@@ -23,6 +23,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         from abu.cli.checks_cosim import check_fmu_dir
         check_fmu_dir("--fmu-dir", args.fmu_dir, ("AbuBall", "SpeedController", "Staircase"))
     out = Path(args.out)
+    if getattr(args, "profile", None):
+        return _render_tracking(args, out)
     if getattr(args, "scenario", "report") == "random":
         if getattr(args, "drive", None):
             raise ParameterError("--drive", args.drive, "no --drive with --scenario random "
@@ -57,6 +59,31 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _render_tracking(args: argparse.Namespace, out: Path) -> int:
+    """``--drive tracking.json --profile profile.json --mu MU``: the seed's camera of the harsh
+    twin filming the tracking drive (:mod:`twin.tracking_scenario`)."""
+    from controller.profile import load_profile
+    from twin.scenario import render_scenario
+    from twin.tracking_scenario import tracking_scenario, tracking_spec
+    from abu.cli.plan import load_drive_option
+
+    if not args.drive:
+        raise ParameterError("--drive", None, "a drive.json of model 'tracking' with --profile "
+                             "(the loop that follows the profile)")
+    drive = load_drive_option(args.drive)
+    profile = load_profile(args.profile)
+    spec = tracking_spec(drive, profile)
+    scn = tracking_scenario(args.seed, spec, args.mu, size=args.size, lighting=args.lighting,
+                            n_frames=args.frames, fps=args.fps)
+    with output_folder(out, overwrite=args.overwrite) as tmp:
+        render_scenario(tmp, scn)
+    slip = "no slip predicted" if scn.predicted_slip_s is None else \
+        f"slip predicted at {scn.predicted_slip_s:.4g} s"
+    _log(args, f"wrote the tracking-drive recording (mu = {args.mu:.5g}, seed {args.seed}, "
+               f"{scn.lighting.kind} lighting, {slip}) to {out}")
+    return 0
+
+
 def register(subparsers) -> None:
     """Add ``render`` to the ``abu`` subcommands."""
     p = subparsers.add_parser("render", help="render the digital twin of the experiment",
@@ -71,6 +98,11 @@ def register(subparsers) -> None:
                         "temporary build)")
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, omega_n "
                    "and tau_motor replace --zeta, --omega-n, --tau-motor")
+    p.add_argument("--profile", default=None,
+                   help="profile.json ('abu design' with a tracking --drive): render the "
+                        "tracking drive following it, filmed by the harsh twin's camera drawn "
+                        "from --seed (applies: --mu, --seed, --frames, --fps, --size, "
+                        "--lighting)")
     p.add_argument("--quiet", action="store_true", help="no messages on stderr")
     p.set_defaults(func=cmd_render)
 

@@ -42,9 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="co-simulate the staircase or the ramp experiment",
                        description="Co-simulate an experiment of the report (ch. 4) on the FMUs "
                                    "and compute the friction bounds mu_low <= mu < mu_high.")
-    p.add_argument("--motion", choices=["staircase", "ramp"], default="staircase",
-                   help="staircase of setpoints (sec. 4.2, default) or prescribed acceleration "
-                        "ramp (sec. 4.1)")
+    p.add_argument("--motion", choices=["staircase", "ramp", "profile"], default="staircase",
+                   help="staircase of setpoints (sec. 4.2, default), prescribed acceleration "
+                        "ramp (sec. 4.1) or a tracking drive following --profile (ch. 6)")
     add_staircase_options(p)
     add_controller_options(p)
     g = p.add_argument_group("ramp")
@@ -68,7 +68,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     g.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     p.add_argument("--drive", default=None, help="drive.json of 'abu identify': its zeta, "
-                   "omega_n and tau_motor replace --zeta, --omega-n, --tau-motor")
+                   "omega_n and tau_motor replace --zeta, --omega-n, --tau-motor; with "
+                   "--motion profile a drive of model tracking")
+    p.add_argument("--profile", default=None, help="--motion profile: the profile.json ('abu "
+                   "design' with a tracking drive) the --drive follows")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("table41", help="smallest |omega0| at which one step keeps the ball stuck",
@@ -106,12 +109,19 @@ def cmd_build_fmus(args: argparse.Namespace) -> int:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from harness.experiments.staircase import run_ramp, run_staircase
 
-    from abu.cli.plan import apply_drive_to_args
-    apply_drive_to_args(args)
-    (check_staircase if args.motion == "staircase" else check_ramp)(args)
-    check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
-    exp = staircase_from_args(args) if args.motion == "staircase" else ramp_from_args(args)
-    run = run_staircase if args.motion == "staircase" else run_ramp
+    if args.motion == "profile":
+        from abu.cli.options_profile import profile_experiment_from_args
+        from harness.experiments.profile_run import run_profile
+        exp = profile_experiment_from_args(args)
+        check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
+        run = run_profile
+    else:
+        from abu.cli.plan import apply_drive_to_args
+        apply_drive_to_args(args)
+        (check_staircase if args.motion == "staircase" else check_ramp)(args)
+        check_fmu_dir("--fmu-dir", args.fmu_dir, FMU_NAMES)
+        exp = staircase_from_args(args) if args.motion == "staircase" else ramp_from_args(args)
+        run = run_staircase if args.motion == "staircase" else run_ramp
     written = []
     if args.out:  # locked and checked before the co-simulation, written at its end
         out = Path(args.out)

@@ -102,7 +102,7 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
         lost_any = None if lost is None else np.asarray(lost, bool)[:, 1:].any(axis=1)
         windows = inference_windows(time.size, kin_mod.sample_interval(time), opt)
         each = replace(opt.inference, confidence=window_sets.level_each(
-            opt.inference.confidence, len(windows)))
+            opt.inference.confidence, len(windows)), theta_harmonic_rad=_lens_prior(kin, opt))
         sets: list[inference_mod.Inference] = []
         for k, window in enumerate(windows):
             kin_w = kin if k == 0 else _kinematics(time, theta, opt.with_(sg_window_s=window))
@@ -130,9 +130,17 @@ def _onset(time: np.ndarray, kin: kin_mod.Kinematics, l: float, d: float, direct
     q_lo, q_hi = onset_mod.q_band(kin.omega, kin.omega_dot, kin.sigma_omega,
                                   kin.sigma_omega_dot, kin.bias_omega_dot, l, d, direction,
                                   float(opt.interval.k_sigma),
-                                  float(opt.inference.theta_harmonic_rad))
+                                  _lens_prior(kin, opt))
     q = signed_mu_req(kin.omega, kin.omega_dot, l, d, direction)
     return onset_mod.onset_bracket(time, q, q_lo, q_hi, kin.trusted, inf.mu_low, inf.mu_high)
+
+
+def _lens_prior(kin: kin_mod.Kinematics, opt: AnalysisOptions) -> float:
+    """The lens prior on theta's first harmonic [rad]; 0 where the kinematics fitted theta's
+    harmonics as nuisances (the profile model: a lens harmonic then does not enter omega_dot)."""
+    if kin.settings.get("theta_harmonics_fitted"):
+        return 0.0
+    return float(opt.inference.theta_harmonic_rad)
 
 
 def _validate(time, x, y, lost, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -110,6 +111,11 @@ class DriveModelInput:
     setpoints: Setpoints
     settings: DriveModelSettings = field(default_factory=DriveModelSettings)
 
+    def fit(self, time: np.ndarray, theta: np.ndarray, sigma_theta: float | None) -> DriveFit:
+        """The fit of this drive over this staircase."""
+        return fit_drive_model(time, theta, self.drive, self.setpoints,
+                               sigma_theta=sigma_theta, settings=self.settings)
+
 
 class _Model:
     """theta, omega, omega_dot of the parametrised drive at the frame times."""
@@ -151,13 +157,14 @@ class _Model:
         return (r.theta if need_theta else None), r.omega, r.alpha
 
 
-def _whiteness(res: np.ndarray, dt: float) -> dict[str, float]:
+def _whiteness(res: np.ndarray, dt: float, blocks_s: tuple[float, ...] = BLOCKS_S
+               ) -> dict[str, float]:
     """p-value per block length of 'the block means are those of white noise'."""
     from scipy.stats import chi2
 
     s = float(np.std(res))
     out = {}
-    for block_s in BLOCKS_S:
+    for block_s in blocks_s:
         m = max(1, int(round(block_s / dt)))
         k = res.size // m
         if k < 4:
@@ -172,12 +179,10 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
                     sigma_theta: float | None = None,
                     settings: DriveModelSettings | None = None) -> DriveFit:
     """Fit the drive model to theta(t) over the whole record (see the module doc)."""
-    from scipy.optimize import least_squares
-
     st = settings or DriveModelSettings()
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
-    dt = sample_interval(t)
+    sample_interval(t)
     sigma = noise_sigma(th) if sigma_theta is None else float(sigma_theta)
     if not sigma > 0:
         return DriveFit(False, "the tracking noise of theta is zero (cannot weight the fit)")
@@ -186,7 +191,18 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
     if np.sign(slope) != np.sign(levels[0]) or np.any(np.sign(levels) != np.sign(levels[0])):
         return DriveFit(False, f"the record turns at {slope:.4g} rad/s on average, the "
                                f"staircase from {levels[0]:.4g} rad/s: not the same direction")
-    model = _Model(t, drive, setpoints, st)
+    return fit_model(t, th, _Model(t, drive, setpoints, st), sigma, st)
+
+
+def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
+              st: DriveModelSettings) -> DriveFit:
+    """Fit a drive model (``names``, ``x0``, ``lo``, ``hi``, ``prior``, ``evaluate``) to
+    theta over the whole record; the residual tests of the module doc decide acceptance.
+    Shared by the staircase loop and the prescribed profile
+    (:mod:`measurement.kinematics.profile_model`)."""
+    from scipy.optimize import least_squares
+
+    dt = sample_interval(t)
     # linear nuisance terms: theta0, a speed offset c t, and harmonics 1..3 of theta itself
     # (a camera's lens and the eccentric axis put a fixed pattern on the tracked angle)
     basis = _linear_basis(t, th, st.harmonics)
@@ -235,7 +251,7 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
     std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(model.names)}
     std.update(theta0_rad=float(math.sqrt(cov[k, k])), omega_offset_rad_s=float(
         math.sqrt(cov[k + 1, k + 1])))
-    block_p = _whiteness(res, dt)
+    block_p = _whiteness(res, dt, getattr(model, "blocks_s", BLOCKS_S))
     fit = DriveFit(True, "", params, std, omega, alpha, se_w, se_a, rms_ratio, block_p,
                    residual=res * sigma)
     level_each = st.level / max(len(block_p), 1)
@@ -277,15 +293,15 @@ def _output_jacobian(model: _Model, p: np.ndarray
     return outs[0], outs[1], outs[2]
 
 
-def model_kinematics(fallback: Kinematics, theta: np.ndarray, drive: Drive,
-                     setpoints: Setpoints, settings: DriveModelSettings | None = None
+def model_kinematics(fallback: Kinematics, theta: np.ndarray, inp: Any
                      ) -> tuple[Kinematics, DriveFit]:
-    """The drive model's kinematics, or ``fallback`` (the Savitzky-Golay ones) when the fit
-    is refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
-    fit = fit_drive_model(fallback.time, theta, drive, setpoints,
-                          sigma_theta=fallback.sigma_theta, settings=settings)
+    """The drive model's kinematics (``inp``: a :class:`DriveModelInput` or a
+    ``ProfileModelInput``), or ``fallback`` (the Savitzky-Golay ones) when the fit is
+    refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
+    fit = inp.fit(fallback.time, theta, fallback.sigma_theta)
     info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
-            "why": fit.why}
+            "why": fit.why, "theta_harmonics_fitted": bool(fit.accepted and getattr(
+                inp, "theta_harmonics_fitted", False))}
     if not fit.accepted:
         return replace(fallback, settings=info), fit
     return replace(fallback, omega=fit.omega, omega_dot=fit.omega_dot,
@@ -294,10 +310,10 @@ def model_kinematics(fallback: Kinematics, theta: np.ndarray, drive: Drive,
                    settings=info, omega_dot_rho=None), fit
 
 
-def apply(fallback: Kinematics, theta: np.ndarray, inp: DriveModelInput | None) -> Kinematics:
+def apply(fallback: Kinematics, theta: np.ndarray, inp: Any) -> Kinematics:
     """The analysis's hook: the drive model's kinematics where ``inp`` is given and the fit
     is accepted, else ``fallback`` (with the refusal's reason in its settings)."""
     if inp is None:
         return replace(fallback, settings={**fallback.settings, "model": "refused",
                                            "why": "no drive and staircase given"})
-    return model_kinematics(fallback, theta, inp.drive, inp.setpoints, inp.settings)[0]
+    return model_kinematics(fallback, theta, inp)[0]
