@@ -37,7 +37,8 @@ class InferenceOptions:
             Default 8e-4: the 90th percentile on the harsh twin's family
             (benchmarks/bench_kinematic_error.py); set it from your camera's calibration.
         mu_d_refine: shrinking 5-point refinements of mu_d per candidate mu (step / 2.5 each).
-        max_episodes: slip episodes followed per candidate (re-stick, re-slip).
+        max_episodes: slip episodes followed per candidate (re-stick, re-slip); None: all
+            (a cap froze candidates with mu in q's noise before the real slip).
         ar_order_max: 1 = AR(1) residuals (0: white).
         noise_model: ``ar1`` (default) or ``leftover``: white noise + a smooth leftover with
             exponential correlation, both estimated from the first fit's residual
@@ -58,7 +59,7 @@ class InferenceOptions:
     theta_harmonics: bool = False
     n_mu: int = 48
     n_mu_d: int = 8
-    max_episodes: int = 4
+    max_episodes: int | None = None
     ar_order_max: int = 1
     window_sigmas: float = 20.0
     noise_model: str = "leftover"
