@@ -205,3 +205,12 @@ def test_api_follows_the_same_rule(tmp_path):
         warnings.simplefilter("always")
         assert api.track(cine, fps_hz=1200).info["fps_hz"] == 1200
     assert [str(w.message) for w in caught if "fps_hz 1200" in str(w.message)]
+
+
+def test_the_twin_at_2000_frames_per_second_holds_its_mu(twin, tmp_path, capsys):
+    """Its true mu (meta.json) lies in the measured interval: before omega_dot's noise entered
+    the predicted slip (tests/test_drive_noise.py) it gave [0.03014, 0.03482] for mu = 0.03."""
+    _, _, folder = twin
+    s = _measure(folder, tmp_path / "m", capsys)
+    mu = json.loads((folder / "meta.json").read_text())["mu"]
+    assert s["mu_low"] <= mu <= s["mu_high"], (s["mu_low"], s["mu_high"], mu)

@@ -52,6 +52,10 @@ class InferenceOptions:
             at the slip; not a default because the factor is fitted, not modelled.
         window_sigmas: the fit ends where the data have moved this many white-noise sigmas of
             beta from the stick level (see :func:`infer_mu`).
+        drive_noise: add to beta's noise covariance the error of the predicted slip that
+            omega_dot's noise causes (q enters the slip's drive q - mu_d, a small difference
+            near the onset; :func:`noise_models.drive_noise_cov`), from the onset of the first
+            pass's best pair (False: the former fit, where that error moved the onset).
     """
 
     confidence: float = 0.95
@@ -68,6 +72,7 @@ class InferenceOptions:
     kinematic_sigma_scale: float = 1.0
     mu_d_refine: int = 7
     theta_harmonic_rad: float = 8e-4
+    drive_noise: bool = True
 
     def __post_init__(self) -> None:
         if not 0.5 <= float(self.confidence) < 1.0:
