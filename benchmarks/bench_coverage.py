@@ -26,6 +26,8 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
     nice python benchmarks/bench_coverage.py --n 200 --camera --out /tmp/cov_cam
     nice python benchmarks/bench_coverage.py --n 100 --first 2000 --two-spot 20 --alt-two-spot 40 \
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
+    nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
+    python benchmarks/bench_coverage.py --reanalyse D   # the kept tracks, current analysis
 """
 from __future__ import annotations
 
@@ -438,8 +440,9 @@ def main() -> None:
                   f"{row['mu']:.5f} -> [{row.get('mu_low')}, {row.get('mu_high')}] "
                   f"{row.get('status', row.get('error'))} ({row['render_s']:.1f} + "
                   f"{row['measure_s']:.1f} s)", flush=True)
-    print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {args.first}.."
-          f"{args.first + args.n - 1} (+{args.two_spot} forced two-spot, +{args.alt_two_spot} "
+    seeds = args.seeds or f"{args.first}..{args.first + args.n - 1}"
+    print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {seeds} "
+          f"(+{args.two_spot} forced two-spot, +{args.alt_two_spot} "
           f"two-spot of the second highlight model), {args.size} px, "
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"
