@@ -26,6 +26,8 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
     nice python benchmarks/bench_coverage.py --n 200 --camera --out /tmp/cov_cam
     nice python benchmarks/bench_coverage.py --n 100 --first 2000 --two-spot 20 --alt-two-spot 40 \
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
+    nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
+    python benchmarks/bench_coverage.py --reanalyse D   # the kept tracks, current analysis
 """
 from __future__ import annotations
 
@@ -90,9 +92,11 @@ def theta_first_harmonic(times: np.ndarray, theta: np.ndarray, theta_true: np.nd
     return float(np.hypot(*coef[3:]))
 
 
-def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0) -> dict:
+def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
+        keep: Path | None = None) -> dict:
     """Render and measure one recording; the row of the results table (``views`` > 0: with
-    a camera calibrated on that many chessboard views, ``abu measure --camera``)."""
+    a camera calibrated on that many chessboard views, ``abu measure --camera``; ``keep``: a
+    folder for the tracks and the true state, to re-analyse with ``--reanalyse``)."""
     t0 = time.perf_counter()
     scn = random_scenario(seed, size=size, lighting=lighting)
     state, pos = simulate_scenario(scn)
@@ -104,6 +108,10 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0) 
     refl = int(scn.lighting.reflections)
     args = ["measure", str(rec), "--out", str(out), "--overwrite", "--quiet", "--no-plots",
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        np.savez(keep / f"state{seed}.npz", times=scn.times, l=scn.ball.l, d=scn.ball.d,
+                 **state)
     cal = {}
     if views:
         cam, cal = calibrate(scn, work, views)
@@ -126,6 +134,14 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0) 
            "setpoint_tau_s": scn.drive.setpoint_tau,
            "render_s": t1 - t0, "measure_s": t2 - t1, "exit": status, **cal}
     rec.unlink()
+    if keep is not None and (out / "tracks.csv").exists():
+        (keep / f"tracks{seed}.csv").write_bytes((out / "tracks.csv").read_bytes())
+    return measured_row(row, status, err, out, scn.times, state)
+
+
+def measured_row(row: dict, status: int, err: io.StringIO, out: Path, times: np.ndarray,
+                 state: dict) -> dict:
+    """``row`` completed from ``abu measure``'s output folder ``out`` and the true state."""
     if status != 0:
         row["error"] = err.getvalue().strip().splitlines()[-1:] or ["?"]
         return row
@@ -156,17 +172,45 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0) 
     if slip.size:
         i = int(slip[0])
         opt = AnalysisOptions()
-        clean = kin_mod.savgol_kinematics(scn.times, state["theta"], window_s=opt.sg_window_s,
+        clean = kin_mod.savgol_kinematics(times, state["theta"], window_s=opt.sg_window_s,
                                           polyorder=opt.sg_polyorder, sigma_theta=1e-15)
         with open(out / "kinematics.csv", newline="") as fh:
             kin = list(csv.DictReader(fh))
         sig = float(kin[i]["sigma_omega_dot_rad_s2"])
         bnd = float(kin[i]["bias_omega_dot_rad_s2"] or 0.0)
         th = np.array([float(k["theta_rad"]) for k in kin])
-        row["theta_a1_rad"] = theta_first_harmonic(scn.times, th, state["theta"])
+        row["theta_a1_rad"] = theta_first_harmonic(times, th, state["theta"])
         row.update({"slip_frame": i, "acc_bias": float(clean.omega_dot[i] - state["alpha"][i]),
                     "acc_sigma": sig, "acc_bound": bnd, "acc_true": float(state["alpha"][i])})
     return row
+
+
+def reanalyse(folder: Path, work: Path) -> list[dict]:
+    """The rows of ``folder/results.jsonl`` measured again from the tracks kept there
+    (``--keep``: ``abu measure --tracks``, the current analysis on the same tracking)."""
+    rows = []
+    for line in open(folder / "results.jsonl"):
+        row = json.loads(line)
+        tracks = folder / f"tracks{row['seed']}.csv"
+        if row.get("exit") != 0 or not tracks.exists():
+            rows.append(row)
+            continue
+        st = dict(np.load(folder / f"state{row['seed']}.npz"))
+        out = work / f"m{row['seed']}"
+        keep = {k: row[k] for k in ("seed", "reflections", "mu", "mu_d", "drive", "tau_motor_s",
+                                    "setpoint_tau_s", "render_s", "forced_lighting")}
+        t1 = time.perf_counter()
+        err = io.StringIO()
+        with redirect_stdout(io.StringIO()), redirect_stderr(err):
+            status = abu_main(["measure", str(tracks), "--tracks", "--out", str(out),
+                               "--overwrite", "--quiet", "--no-plots", "--l",
+                               repr(float(st["l"])), "--d", repr(float(st["d"]))])
+        keep.update({"measure_s": time.perf_counter() - t1, "exit": status})
+        rows.append(measured_row(keep, status, err, out, st["times"], st))
+        r = rows[-1]
+        print(f"seed {r['seed']} mu {r['mu']:.5f} -> [{r.get('mu_low')}, {r.get('mu_high')}] "
+              f"{r.get('status', r.get('error'))}", flush=True)
+    return rows
 
 
 def covered(lo: float | None, hi: float | None, mu: float) -> bool:
@@ -337,6 +381,13 @@ def main() -> None:
                          "'abu calibrate-camera', then 'abu measure --camera'")
     ap.add_argument("--views", type=int, default=DEFAULT_VIEWS,
                     help=f"calibration views with --camera (default {DEFAULT_VIEWS})")
+    ap.add_argument("--seeds", default=None,
+                    help="comma-separated seeds of the family instead of --first/--n")
+    ap.add_argument("--keep", default=None,
+                    help="folder to keep each recording's tracks and true state in")
+    ap.add_argument("--reanalyse", default=None,
+                    help="a --keep folder: measure its kept tracks again with the current "
+                         "analysis (no rendering) and print the figures")
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
@@ -348,10 +399,21 @@ def main() -> None:
         report([r for r in rows if r["reflections"] == 2],
                "two reflections (--ball-reflections 2)")
         return
+    if args.reanalyse:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows = reanalyse(Path(args.reanalyse), Path(tmp))
+        if args.out:
+            Path(args.out).mkdir(parents=True, exist_ok=True)
+            with open(Path(args.out) / "results.jsonl", "w") as fh:
+                fh.writelines(json.dumps(r) + "\n" for r in rows)
+        print(f"{len(rows)} recordings re-analysed from the tracks in {args.reanalyse}")
+        report(rows, "all recordings")
+        return
     out = Path(args.out or tempfile.mkdtemp(prefix="bench_coverage_"))
     out.mkdir(parents=True, exist_ok=True)
     log = out / "results.jsonl"
-    family = [(s, None) for s in range(args.first, args.first + args.n)]
+    family = [(s, None) for s in (range(args.first, args.first + args.n) if not args.seeds
+                                  else [int(v) for v in args.seeds.split(",")])]
     forced = [(s, "two_spot") for s in range(args.first + args.n,
                                              args.first + args.n + args.two_spot)]
     first_alt = args.first + args.n + args.two_spot
@@ -368,7 +430,8 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp, open(log, "a") as fh:
         for k, (seed, lighting) in enumerate(jobs):
-            row = one(seed, Path(tmp), args.size, lighting, args.views if args.camera else 0)
+            row = one(seed, Path(tmp), args.size, lighting, args.views if args.camera else 0,
+                      Path(args.keep) if args.keep else None)
             row["forced_lighting"] = lighting
             rows.append(row)
             fh.write(json.dumps(row) + "\n")
@@ -377,8 +440,9 @@ def main() -> None:
                   f"{row['mu']:.5f} -> [{row.get('mu_low')}, {row.get('mu_high')}] "
                   f"{row.get('status', row.get('error'))} ({row['render_s']:.1f} + "
                   f"{row['measure_s']:.1f} s)", flush=True)
-    print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {args.first}.."
-          f"{args.first + args.n - 1} (+{args.two_spot} forced two-spot, +{args.alt_two_spot} "
+    seeds = args.seeds or f"{args.first}..{args.first + args.n - 1}"
+    print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {seeds} "
+          f"(+{args.two_spot} forced two-spot, +{args.alt_two_spot} "
           f"two-spot of the second highlight model), {args.size} px, "
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"

@@ -237,3 +237,12 @@ def test_one_frame_rate_limit_for_options_library_files_and_plans(tmp_path, caps
     # at the limit: accepted by the library
     tracks = api.track(npy, fps_hz=MAX_CAMERA_FPS_HZ)
     assert tracks is not None
+
+
+def test_the_twin_at_2000_frames_per_second_holds_its_mu(twin, tmp_path, capsys):
+    """Its true mu (meta.json) lies in the measured interval: before omega_dot's noise entered
+    the predicted slip (tests/test_drive_noise.py) it gave [0.03014, 0.03482] for mu = 0.03."""
+    _, _, folder = twin
+    s = _measure(folder, tmp_path / "m", capsys)
+    mu = json.loads((folder / "meta.json").read_text())["mu"]
+    assert s["mu_low"] <= mu <= s["mu_high"], (s["mu_low"], s["mu_high"], mu)

@@ -2,7 +2,8 @@
 
 Seed 3064 of the harsh family (unseen by any tuning) is the case that prompted it: the fit put a
 slip with mu_d near 0 at 0.021 s, where the ABU barely accelerates, and reported [0, 0.0016]
-"ok" for a true mu of 0.0376 while the running max gave [0.035, 0.041].
+"ok" for a true mu of 0.0376 while the running max gave [0.035, 0.041] (its cause, the slip
+model's cap of 4 episodes, is fixed: tests/test_slip_episodes.py).
 """
 from __future__ import annotations
 
@@ -30,8 +31,11 @@ def test_disjoint_intervals_are_flagged_and_overlapping_ones_are_not():
     assert _disagreement(*_sets((0.0, 0.0016), (0.035, 0.041), "lost markers")) is None
 
 
-def test_the_wrong_ok_of_seed_3064_is_flagged(tmp_path, capsys):
-    assert main(["render", "--scenario", "random", "--seed", "3064", "--out",
+def test_the_miss_of_seed_3057_is_flagged(tmp_path, capsys):
+    """Seed 3064 no longer disagrees (every slip episode is followed now,
+    tests/test_slip_episodes.py); seed 3057 (unseen, a lower bound 7 % above mu, fitted onset
+    3 ms late in beta's lighting leftover) still does, and the status says so."""
+    assert main(["render", "--scenario", "random", "--seed", "3057", "--out",
                  str(tmp_path / "rec"), "--quiet"]) == 0
     assert main(["measure", str(tmp_path / "rec"), "--out", str(tmp_path / "m"), "--no-plots",
                  "--quiet"]) == 0

@@ -21,7 +21,10 @@ linearly and are profiled out by least squares. The noise is coloured: white tra
 plus the smooth leftover of the lighting structure the whole-record harmonic fit leaves on beta
 (exponential correlation; both sizes and the correlation time estimated from the first fit's
 residual, ``noise_models.leftover_whitener``); the fit is generalised least squares with that
-covariance (``noise_model="ar1"``: the former AR(1) whitening). mu_d is profiled out by a
+covariance (``noise_model="ar1"``: the former AR(1) whitening), plus the error that
+omega_dot's noise puts on the predicted slip (integrated twice from the best first-pass
+onset, ``drive_noise``: near the onset the drive q - mu_d is a small difference, so a few per
+cent of noise on q are tens of per cent of the emerging slip). mu_d is profiled out by a
 shrinking grid per mu (to 1e-4 of mu; a coarse mu_d grid made the profile narrow and wrong).
 The profile likelihood ratio of mu against chi^2_1 at the
 stated confidence gives the set of mu the beta data allow *given* the measured kinematics.
@@ -54,7 +57,7 @@ from statistics import NormalDist
 
 from measurement.inference.types import LOST_ACROSS_SLIP, MU_D_RATIO, Inference, InferenceOptions  # noqa: F401
 from measurement.inference.noise_models import Gls as _Gls, ar1 as _ar1, leftover_whitener, long_run_factor  # noqa: F401
-from measurement.inference.noise_models import leftover_whitener_of
+from measurement.inference.noise_models import drive_noise_cov, leftover_whitener_of
 from measurement.inference.noise_models import noise_level  # noqa: F401 (re-exported)
 from measurement.inference import sup_noise  # noqa: F401
 from measurement.inference.slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
@@ -112,11 +115,28 @@ def _best_model(models: SlipModelCache, mu_grid: np.ndarray, rss: np.ndarray,
     return m_best[0]
 
 
+def _drive_cov(win: Window, models: SlipModelCache, mu: float, mu_d: float,
+               drive: tuple[np.ndarray, np.ndarray | None] | None) -> np.ndarray | None:
+    """Covariance [rad^2] of the predicted slip from omega_dot's noise, from the onset of the
+    pair (mu, mu_d) (:func:`noise_models.drive_noise_cov`); None without it."""
+    if drive is None:
+        return None
+    _, i_on = _slip_onset(models, win, mu, mu_d)
+    if i_on is None:
+        return None
+    sig = np.asarray(drive[0], float)[win.i0:win.i0 + win.t.size]
+    return drive_noise_cov(sig, drive[1], float(win.t[1] - win.t[0]), i_on,
+                           (1.0 - 0.2 * models.d_over_l) / 1.4)
+
+
 def _fit_noise_model(win: Window, mu_grid: np.ndarray, ratios: np.ndarray,
                      profile: MuDProfile, noise: dict | None,
-                     record_residual: np.ndarray | None, opt: InferenceOptions) -> _NoiseFit:
+                     record_residual: np.ndarray | None, opt: InferenceOptions,
+                     drive: tuple[np.ndarray, np.ndarray | None] | None = None) -> _NoiseFit:
     """Profile under beta's noise model: the given one, else estimated from the residual of a
-    first, white-noise fit (``ar1`` or ``leftover``; ``ar_order_max`` 0: white)."""
+    first, white-noise fit (``ar1`` or ``leftover``; ``ar_order_max`` 0: white). ``drive``:
+    (sigma_omega_dot [rad/s^2] over the record, its autocorrelation): with the leftover model,
+    the noise of the predicted slip from the best first-pass pair's onset is added."""
     t, y, x = win.t, win.beta, win.x
     if noise is not None and opt.ar_order_max >= 1 and opt.noise_model == "leftover":
         # the sets of several kinematics windows share the record's noise model
@@ -137,7 +157,11 @@ def _fit_noise_model(win: Window, mu_grid: np.ndarray, ratios: np.ndarray,
     if opt.noise_model == "leftover":
         rec = None if record_residual is None else \
             np.asarray(record_residual, float)[win.region]
-        winv, info = leftover_whitener(y - fitted, float(t[1] - t[0]), record_residual=rec)
+        b = int(np.argmin(rss))
+        extra = _drive_cov(win, profile.models, float(mu_grid[b]), float(mu_grid[b] * rbest[b]),
+                           drive)
+        winv, info = leftover_whitener(y - fitted, float(t[1] - t[0]), record_residual=rec,
+                                       extra_cov=extra)
         gls = _Gls(y, x, 0.0, winv)
     else:
         gls = _Gls(y, x, rho)
@@ -354,7 +378,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     models = SlipModelCache(win.t, win.q, win.omega, region.run_max, int(direction), d / l,
                             opt.max_episodes)
     profile = MuDProfile(models, opt.mu_d_refine)
-    fit = _fit_noise_model(win, mu_grid, ratios, profile, noise, record_residual, opt)
+    fit = _fit_noise_model(win, mu_grid, ratios, profile, noise, record_residual, opt,
+                           (sigma_omega_dot, omega_dot_rho) if opt.drive_noise else None)
     lrf = _long_run_factor(win, fit, mu_grid, models, opt)
     mu_grid, rss = _refine_mu_grid(mu_grid, fit, lrf, win, ratios, profile, crit, opt)
     pset = _accepted_set(mu_grid, rss, lrf, win, crit)

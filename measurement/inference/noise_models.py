@@ -48,7 +48,8 @@ def _leftover_params(res: np.ndarray, h: float, max_tau_s: float) -> tuple[float
 
 
 def leftover_whitener(res: np.ndarray, h: float, max_tau_s: float = 0.02,
-                      record_residual: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                      record_residual: np.ndarray | None = None,
+                      extra_cov: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Inverse Cholesky factor of white noise + a smooth leftover (exponential correlation).
 
     Residual = white tracking noise (sigma_w, from first differences, which the smooth part
@@ -72,10 +73,39 @@ def leftover_whitener(res: np.ndarray, h: float, max_tau_s: float = 0.02,
             sl2, tau = sl2_r, tau_r
     info = {"sigma_white_rad": math.sqrt(sw2), "sigma_leftover_rad": math.sqrt(sl2),
             "leftover_tau_s": tau}
-    return leftover_whitener_of(info, np.asarray(res).size, h), info
+    return leftover_whitener_of(info, np.asarray(res).size, h, extra_cov), info
 
 
-def leftover_whitener_of(noise: dict, n: int, h: float) -> np.ndarray:
+def drive_noise_cov(sigma_omega_dot: np.ndarray, rho: np.ndarray | None, h: float, i_on: int,
+                    gain: float) -> np.ndarray:
+    """Covariance [rad^2] of the slip displacement's error that omega_dot's noise causes.
+
+    In slip the model drives u' = omega^2 (q - mu_d) / 1.4 with the measured q; q's error
+    omega^2 dq = gain * d(omega_dot) (gain = (1 - d / (5 l)) / 1.4, omega cancels) is
+    integrated twice from the onset sample ``i_on``. Near the onset q - mu_d is a small
+    difference (when mu_d ~ mu) and a noise error of a few per cent of q changes the emerging
+    slip by tens of per cent: the fit then moves the onset (and mu) instead. omega_dot's
+    error: sigma_omega_dot [rad/s^2] per sample, autocorrelation ``rho`` at lags 0, 1, ...
+    (``Kinematics.omega_dot_rho``; None: no covariance).
+    """
+    n = np.asarray(sigma_omega_dot).size
+    cov = np.zeros((n, n))
+    if rho is None or i_on >= n - 1:
+        return cov
+    s = np.asarray(sigma_omega_dot, float)[i_on:]
+    m = s.size
+    r = np.zeros(m)
+    k = min(m, np.asarray(rho).size)
+    r[:k] = np.asarray(rho, float)[:k]
+    c = s[:, None] * s[None, :] * r[np.abs(np.arange(m)[:, None] - np.arange(m)[None, :])]
+    for axis in (0, 0, 1, 1):   # D = h^2 * double cumulative sum of the error
+        c = np.cumsum(c, axis=axis)
+    cov[i_on:, i_on:] = (gain * h * h) ** 2 * c
+    return cov
+
+
+def leftover_whitener_of(noise: dict, n: int, h: float,
+                         extra_cov: np.ndarray | None = None) -> np.ndarray:
     """Inverse Cholesky factor of the covariance of :func:`leftover_whitener` for ``n``
     samples of spacing ``h`` [s], from its ``noise`` info (the sigmas [rad], tau [s]): the
     sets of several Savitzky-Golay windows share beta's noise model (:mod:`window_sets`)."""
@@ -85,6 +115,8 @@ def leftover_whitener_of(noise: dict, n: int, h: float) -> np.ndarray:
     corr = sl2 * np.exp(-(np.arange(n) * h) / noise["leftover_tau_s"])
     cov = corr[np.abs(np.arange(n)[:, None] - np.arange(n)[None, :])]
     cov[np.diag_indices(n)] += sw2
+    if extra_cov is not None:
+        cov = cov + extra_cov
     return lower_triangular_inverse(np.linalg.cholesky(cov))
 
 

@@ -28,11 +28,11 @@ class SlipModelCache:
             sample with q > mu).
         direction: slip direction s (+1 / -1).
         d_over_l: ball diameter over path radius [1].
-        max_episodes: slip episodes followed per candidate.
+        max_episodes: slip episodes followed per candidate (None: all).
     """
 
     def __init__(self, t: np.ndarray, q: np.ndarray, omega: np.ndarray, run_max: np.ndarray,
-                 direction: int, d_over_l: float, max_episodes: int) -> None:
+                 direction: int, d_over_l: float, max_episodes: int | None) -> None:
         self.t, self.q, self.omega, self.run_max = t, q, omega, run_max
         self.direction, self.d_over_l, self.max_episodes = direction, d_over_l, max_episodes
         self._rows: dict = {}

@@ -190,8 +190,11 @@ def predicted_creep(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
         return out
     seg = slice(start, stop + 1)
     q = signed_mu_req(np.asarray(omega)[seg], np.asarray(omega_dot)[seg], l, d, direction)
+    # 4 episodes, as before the model-based set followed every one (issue 18): this creep
+    # bound's spread over redrawn noise is pinned (tests/test_uncertainty.py); following all
+    # would steady it, a change of the report's method left for its own review
     disp, _ = slip_displacement(t[seg], q, np.asarray(omega, dtype=float)[seg], mu, mu,
-                                direction, d / l)
+                                direction, d / l, max_episodes=4)
     out[:, seg] = disp
     out[:, stop + 1:] = disp[:, -1:]
     return out

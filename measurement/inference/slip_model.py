@@ -18,7 +18,7 @@ def signed_mu_req(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float,
 
 def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
                       mu_d: np.ndarray, direction: int, d_over_l: float, *,
-                      max_episodes: int = 4) -> tuple[np.ndarray, np.ndarray]:
+                      max_episodes: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Displacement along the slip direction D [rad] for candidate pairs (mu, mu_d).
 
     Args:
@@ -28,6 +28,10 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
         mu, mu_d: (M,) candidate static and sliding coefficients [-].
         direction: slip direction s (+1 / -1).
         d_over_l: ball diameter / path radius [-].
+        max_episodes: slip episodes followed per candidate; None (default): every one to the
+            end of the record. A cap freezes a candidate after its last followed re-stick, as
+            if it stuck for good while q exceeds its mu again: a candidate with mu in q's noise
+            (a few episodes on noise near q = 0) then escapes the record's real slip.
 
     Returns:
         (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
@@ -57,7 +61,9 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
     rows = np.flatnonzero(above.any(axis=1))                 # rows with an onset ahead
     i_s = np.argmax(above[rows], axis=1)                     # ... and its sample
     start = np.zeros(rows.size, dtype=int)                   # where its search began
-    for _ in range(int(max_episodes)):
+    episode = 0
+    while max_episodes is None or episode < int(max_episodes):
+        episode += 1
         # Only the rows with an onset still ahead are integrated, on the columns from just
         # before their earliest onset: the others add nothing, the leading columns are 0 and
         # sum exactly, so the numbers are those of the whole-array loop.

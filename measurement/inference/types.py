@@ -37,7 +37,8 @@ class InferenceOptions:
             Default 8e-4: the 90th percentile on the harsh twin's family
             (benchmarks/bench_kinematic_error.py); set it from your camera's calibration.
         mu_d_refine: shrinking 5-point refinements of mu_d per candidate mu (step / 2.5 each).
-        max_episodes: slip episodes followed per candidate (re-stick, re-slip).
+        max_episodes: slip episodes followed per candidate (re-stick, re-slip); None: all
+            (a cap froze candidates with mu in q's noise before the real slip).
         ar_order_max: 1 = AR(1) residuals (0: white).
         noise_model: ``ar1`` (default) or ``leftover``: white noise + a smooth leftover with
             exponential correlation, both estimated from the first fit's residual
@@ -51,6 +52,10 @@ class InferenceOptions:
             at the slip; not a default because the factor is fitted, not modelled.
         window_sigmas: the fit ends where the data have moved this many white-noise sigmas of
             beta from the stick level (see :func:`infer_mu`).
+        drive_noise: add to beta's noise covariance the error of the predicted slip that
+            omega_dot's noise causes (q enters the slip's drive q - mu_d, a small difference
+            near the onset; :func:`noise_models.drive_noise_cov`), from the onset of the first
+            pass's best pair (False: the former fit, where that error moved the onset).
     """
 
     confidence: float = 0.95
@@ -58,7 +63,7 @@ class InferenceOptions:
     theta_harmonics: bool = False
     n_mu: int = 48
     n_mu_d: int = 8
-    max_episodes: int = 4
+    max_episodes: int | None = None
     ar_order_max: int = 1
     window_sigmas: float = 20.0
     noise_model: str = "leftover"
@@ -67,6 +72,7 @@ class InferenceOptions:
     kinematic_sigma_scale: float = 1.0
     mu_d_refine: int = 7
     theta_harmonic_rad: float = 8e-4
+    drive_noise: bool = True
 
     def __post_init__(self) -> None:
         if not 0.5 <= float(self.confidence) < 1.0:
