@@ -17,7 +17,7 @@ from abu_model.params import PlantParams
 from harness.cosim import reuse
 from harness.cosim.master import CoSimulation
 from harness.experiments.staircase import RampExperiment
-from test_native_agreement import family_case
+from staircase_family import draw_experiment
 
 HZ = 2.0 * math.pi
 
@@ -48,7 +48,7 @@ def test_direct_calls_equal_the_logged_plan_walk_on_random_staircases(
         build, cases, native_fmu_dir, fmu_dir):
     fmus = native_fmu_dir if build == "native" else fmu_dir
     rng = random.Random(2121)
-    family = [family_case(rng) for _ in range(cases)]
+    family = [draw_experiment(rng) for _ in range(cases)]
     steps = 0
     reused = None
     try:
