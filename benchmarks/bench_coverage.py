@@ -24,6 +24,7 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
 
     nice python benchmarks/bench_coverage.py --n 200 --out /tmp/cov
     nice python benchmarks/bench_coverage.py --n 200 --camera --out /tmp/cov_cam
+    nice python benchmarks/bench_coverage.py --n 200 --edge-step   # the tracker's edge step
     nice python benchmarks/bench_coverage.py --n 100 --first 2000 --two-spot 20 --alt-two-spot 40 \
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
     nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
@@ -56,6 +57,8 @@ from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
 
+#: Options added to every ``abu measure`` of the rendered recordings (``--edge-step``).
+EXTRA_MEASURE_ARGS: list[str] = []
 #: theta's harmonic prior without a camera file (the family prior).
 THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
 
@@ -108,6 +111,7 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
     refl = int(scn.lighting.reflections)
     args = ["measure", str(rec), "--out", str(out), "--overwrite", "--quiet", "--no-plots",
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+    args += EXTRA_MEASURE_ARGS
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
         np.savez(keep / f"state{seed}.npz", times=scn.times, l=scn.ball.l, d=scn.ball.d,
@@ -376,6 +380,8 @@ def main() -> None:
                          "(twin.lighting_alt; seeds after the forced two-spot ones)")
     ap.add_argument("--size", type=int, default=256, help="frame size [px]")
     ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
+    ap.add_argument("--edge-step", action="store_true",
+                    help="track with 'abu measure --edge-step' (the edge-model step)")
     ap.add_argument("--camera", action="store_true",
                     help="per recording: render chessboard views through its optics, "
                          "'abu calibrate-camera', then 'abu measure --camera'")
@@ -391,6 +397,8 @@ def main() -> None:
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
+    if args.edge_step:
+        EXTRA_MEASURE_ARGS.append("--edge-step")
     if args.summarize:
         rows = [json.loads(line) for line in open(args.summarize)]
         print(f"{len(rows)} recordings from {args.summarize}")
