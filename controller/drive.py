@@ -42,12 +42,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-try:  # the shared error type; a vendored copy inside an FMU falls back to ValueError
+from controller.json_file import read_json_object
+
+try:  # the shared error type; without abu_model it falls back to ValueError
     from abu_model.errors import AbuError as _Base
-    from abu_model.validate import json_object as _json_object
 except ImportError:  # pragma: no cover - only without abu_model
     _Base = ValueError  # type: ignore[assignment,misc]
-    _json_object = None
 
 KIND = "abu-drive"
 VERSION = 1
@@ -246,22 +246,9 @@ def _tracking_from_dict(obj: dict, source: str) -> Drive:
 
 def load_drive(path: str | Path) -> Drive:
     """Read and validate a drive.json; :class:`DriveFileError` names the file and the field."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise DriveFileError(str(p), f"cannot be read ({exc.strerror or exc})") from None
-    except UnicodeDecodeError:
-        raise DriveFileError(str(p), "is not UTF-8 text (expected a JSON drive file)") from None
-    if _json_object is not None:  # strict: a key given twice, NaN or Infinity refused
-        obj = _json_object(text, str(p), "a JSON object (a drive.json of 'abu identify')",
-                           error=lambda m: DriveFileError(str(p), m.split(": ", 1)[1]))
-        return drive_from_dict(obj, str(p))
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise DriveFileError(str(p), f"is not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    return drive_from_dict(obj, str(p))
+    obj, source = read_json_object(path, "a JSON object (a drive.json of 'abu identify')",
+                                   DriveFileError)
+    return drive_from_dict(obj, source)
 
 
 def dumps_drive(drive: Drive) -> str:

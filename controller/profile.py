@@ -29,12 +29,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-try:  # the shared error type; a vendored copy inside an FMU falls back to ValueError
+from controller.json_file import read_json_object
+
+try:  # the shared error type; without abu_model it falls back to ValueError
     from abu_model.errors import AbuError as _Base
-    from abu_model.validate import json_object as _json_object
 except ImportError:  # pragma: no cover - only without abu_model
     _Base = ValueError  # type: ignore[assignment,misc]
-    _json_object = None
 
 KIND = "abu-profile"
 VERSION = 1
@@ -202,23 +202,9 @@ def profile_from_dict(obj: Any, source: str = "profile.json") -> Profile:
 
 def load_profile(path: str | Path) -> Profile:
     """Read and validate a profile.json; :class:`ProfileFileError` names the file and field."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileFileError(str(p), f"cannot be read ({exc.strerror or exc})") from None
-    except UnicodeDecodeError:
-        raise ProfileFileError(str(p), "is not UTF-8 text (expected a JSON profile)") from None
-    if _json_object is not None:  # strict: a key given twice, NaN or Infinity refused
-        obj = _json_object(text, str(p), "a JSON object (a profile.json of 'abu design')",
-                           error=lambda m: ProfileFileError(str(p), m.split(": ", 1)[1]))
-        return profile_from_dict(obj, str(p))
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ProfileFileError(str(p), f"is not valid JSON (line {exc.lineno}: {exc.msg})"
-                               ) from None
-    return profile_from_dict(obj, str(p))
+    obj, source = read_json_object(path, "a JSON object (a profile.json of 'abu design')",
+                                   ProfileFileError)
+    return profile_from_dict(obj, source)
 
 
 def dumps_profile(profile: Profile) -> str:
