@@ -33,9 +33,9 @@ from controller.profile import Profile
 from harness.experiments.bounds import (ExperimentResult, _finish_summary, _switches, _table,
                                         friction_bounds)
 from harness.experiments.fmu_files import ensure_fmus
-from harness.experiments.staircase import _plant_parameters, _plant_probes
+from harness.experiments.staircase import ball_fields, plant_alone
 from harness.cosim.reuse import run_system
-from harness.cosim.system import Component, Source, System
+from harness.cosim.system import Source, System
 
 #: Time simulated before the profile's first knot (steady state) [s].
 PRE_ROLL = 0.05
@@ -109,16 +109,11 @@ class ProfileExperiment:
         """AbuBall alone, the loop's exact torque as its sources."""
         r = response(self.profile, np.array([self.t_start]), float(self.drive.bandwidth),
                      self.plant.tau_motor)
-        plant = _plant_parameters(self.plant)
-        plant.update(theta0=0.0, omega0=float(r.omega[0]), beta0=self.beta0, beta_dot0=0.0)
-        return System(components=(Component("plant", fmus["AbuBall"], plant),),
-                      sources=self.torque_sources(),
-                      probes={"torque": "plant.torque", **_plant_probes(fmus["AbuBall"])})
+        return plant_alone(self.plant, fmus["AbuBall"], float(r.omega[0]), self.beta0,
+                           self.torque_sources())
 
     def as_dict(self) -> dict[str, Any]:
-        b = self.plant.ball
-        return {"motion": "profile", "mu": b.mu, "mu_d": b.mu_dynamic, "m_kg": b.m, "d_m": b.d,
-                "l_m": b.l, "J_abu_kg_m2": self.plant.J_abu, "tau_motor_s": self.plant.tau_motor,
+        return {"motion": "profile", **ball_fields(self.plant),
                 "bandwidth_rad_s": self.drive.bandwidth, "t_start_s": self.t_start,
                 "t_end_s": self.stop, "comm_step_s": self.comm_step, "beta0_rad": self.beta0,
                 "profile": {"time_s": list(self.profile.times),

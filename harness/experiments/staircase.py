@@ -63,6 +63,23 @@ def _plant_parameters(plant: PlantParams) -> dict[str, Any]:
             "tau_motor": plant.tau_motor, "ball_reaction": plant.ball_reaction}
 
 
+def plant_alone(plant: PlantParams, abu_ball: Path, omega0: float, beta0: float,
+                sources: tuple[Source, ...]) -> System:
+    """AbuBall without the controller, its torque inputs fed by ``sources`` (the ramp and the
+    tracking drive's exact loop): at rest on the rim at omega0 [rad/s], beta0 [rad]."""
+    params = _plant_parameters(plant)
+    params.update(theta0=0.0, omega0=omega0, beta0=beta0, beta_dot0=0.0)
+    return System(components=(Component("plant", abu_ball, params),), sources=sources,
+                  probes={"torque": "plant.torque", **_plant_probes(abu_ball)})
+
+
+def ball_fields(plant: PlantParams) -> dict[str, Any]:
+    """The ball's and the plant's parameters as an experiment's ``as_dict`` names them."""
+    b = plant.ball
+    return {"mu": b.mu, "mu_d": b.mu_dynamic, "m_kg": b.m, "d_m": b.d, "l_m": b.l,
+            "J_abu_kg_m2": plant.J_abu, "tau_motor_s": plant.tau_motor}
+
+
 def _check_stepping(exp: Any) -> None:
     """comm_step and tol of an experiment: None or finite and > 0."""
     for name, expected in (("comm_step", "a communication step > 0 s"),
@@ -331,18 +348,12 @@ class RampExperiment:
     def system(self, fmus: Mapping[str, Path]) -> System:
         """AbuBall alone with the torque ramp and its rate as sources."""
         slope = self.torque_slope
-        plant = _plant_parameters(self.plant)
-        plant.update(theta0=0.0, omega0=self.omega0, beta0=self.beta0, beta_dot0=0.0)
-        return System(
-            components=(Component("plant", fmus["AbuBall"], plant),),
-            sources=(Source("plant.torque", lambda t: slope * t),
-                     Source("plant.torque_rate", lambda t: slope)),
-            probes={"torque": "plant.torque", **_plant_probes(fmus["AbuBall"])})
+        return plant_alone(self.plant, fmus["AbuBall"], self.omega0, self.beta0,
+                           (Source("plant.torque", lambda t: slope * t),
+                            Source("plant.torque_rate", lambda t: slope)))
 
     def as_dict(self) -> dict[str, Any]:
-        b = self.plant.ball
-        return {"motion": "ramp", "mu": b.mu, "mu_d": b.mu_dynamic, "m_kg": b.m, "d_m": b.d,
-                "l_m": b.l, "J_abu_kg_m2": self.plant.J_abu, "tau_motor_s": self.plant.tau_motor,
+        return {"motion": "ramp", **ball_fields(self.plant),
                 "ball_reaction": self.plant.ball_reaction, "omega0_rad_s": self.omega0,
                 "jerk_rad_s3": self.jerk, "t_end_s": self.t_end, "comm_step_s": self.comm_step,
                 "tol": _effective_tol(self), "beta0_rad": self.beta0}
