@@ -12,12 +12,11 @@ onset).
 """
 from __future__ import annotations
 
-import json
 
 import numpy as np
 
-from abu.cli.main import main
 from measurement.inference.noise_models import drive_noise_cov
+from rendered_seed import render_and_measure
 
 
 def test_drive_noise_covariance_matches_a_monte_carlo_double_integration():
@@ -41,12 +40,7 @@ def test_drive_noise_covariance_matches_a_monte_carlo_double_integration():
 
 def test_seed_3054_holds_mu(tmp_path, capsys):
     """Rendered end to end: the interval holds mu (was [0.01453, 0.02558] for 0.01354)."""
-    assert main(["render", "--scenario", "random", "--seed", "3054", "--out",
-                 str(tmp_path / "rec"), "--quiet"]) == 0
-    assert main(["measure", str(tmp_path / "rec"), "--out", str(tmp_path / "m"), "--no-plots",
-                 "--quiet"]) == 0
-    summary = json.loads((tmp_path / "m" / "summary.json").read_text())
-    mu = json.loads((tmp_path / "rec" / "meta.json").read_text())["mu"]
+    summary, mu = render_and_measure(3054, tmp_path)
     assert summary["mu_low"] <= mu <= summary["mu_high"]
     assert summary["relative_width"] < 0.8
     capsys.readouterr()

@@ -8,12 +8,11 @@ mu of 0.0376, a slip "with mu_d near 0 at 0.021 s".
 """
 from __future__ import annotations
 
-import json
 
 import numpy as np
 
-from abu.cli.main import main
 from measurement.inference.slip_model import slip_displacement
+from rendered_seed import render_and_measure
 
 
 def _reference(t, q, omega, mu, mu_d, d_over_l):
@@ -57,12 +56,7 @@ def test_a_candidate_in_q_noise_still_slips_when_q_rises():
 
 def test_seed_3064_is_measured_around_its_true_mu(tmp_path, capsys):
     """Rendered end to end: the interval holds mu, status ok (was [0, 0.0016], "check")."""
-    assert main(["render", "--scenario", "random", "--seed", "3064", "--out",
-                 str(tmp_path / "rec"), "--quiet"]) == 0
-    assert main(["measure", str(tmp_path / "rec"), "--out", str(tmp_path / "m"), "--no-plots",
-                 "--quiet"]) == 0
-    summary = json.loads((tmp_path / "m" / "summary.json").read_text())
-    mu = json.loads((tmp_path / "rec" / "meta.json").read_text())["mu"]
+    summary, mu = render_and_measure(3064, tmp_path)
     assert summary["mu_low"] <= mu <= summary["mu_high"]
     assert summary["relative_width"] < 0.3
     assert summary["status"] == "ok"
