@@ -227,6 +227,16 @@ def test_one_frame_rate_limit_for_options_library_files_and_plans(tmp_path, caps
         api.track(npy, fps_hz=too_fast)
     assert main(["design", "--mu-range", "0.02", "0.04", "--fps", f"{too_fast:g}"]) == 2
     assert "--fps" in capsys.readouterr().err
+    # the tracking drive's design too (it had its own check, at 1e6)
+    tracking = tmp_path / "tracking.json"
+    tracking.write_text(json.dumps({"kind": "abu-drive", "format_version": 1,
+                                    "model": "tracking", "bandwidth_rad_s": 150.0}))
+    assert main(["design", "--mu-range", "0.02", "0.04", "--drive", str(tracking),
+                 "--fps", f"{too_fast:g}"]) == 2
+    assert "'--fps'" in capsys.readouterr().err
+    # 2e6 frames/s passes the rate check (a 3072-frame record is then too short to design in)
+    main(["design", "--mu-range", "0.02", "0.04", "--drive", str(tracking), "--fps", "2e6"])
+    assert "'--fps'" not in capsys.readouterr().err
     hpath, _ = write_mraw(tmp_path / "cam", frames, 2000, 8)
     text = hpath.read_text().replace("Record Rate(fps) : 2000",
                                      f"Record Rate(fps) : {too_fast:.0f}")

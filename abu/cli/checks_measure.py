@@ -8,13 +8,11 @@ from __future__ import annotations
 import argparse
 
 from abu_model.errors import ParameterError
-from abu_model.params import MAX_CAMERA_FPS_HZ
-from abu.cli.common import count_limit, in_range, integer_range, positive
+from abu.cli.common import camera_fps, count_limit, in_range, integer_range, positive
 
 #: Option limits (why: in the messages).
 MAX_MC_DRAWS = 100_000
 MAX_POLY_DEGREE = 30
-MAX_FPS = MAX_CAMERA_FPS_HZ
 MAX_RECORD_S = 100.0
 #: Ranges of the render options (option, low, high, unit, why); checked when present.
 RENDER_RANGES = (
@@ -59,8 +57,7 @@ def check_tracking_options(args: argparse.Namespace) -> None:
         raise ParameterError("--method", args.method, f"one of {', '.join(METHODS)}")
     positive("--fps", args.fps, "frames/s", allow_none=True)
     if args.fps is not None:
-        in_range("--fps", args.fps, 1.0, MAX_FPS, "frames/s",
-                 "high-speed cameras record up to about 1e6 frames/s")
+        camera_fps("--fps", args.fps)
     integer_range("--window", args.window, 8, 4096, "the square tracking window around a marker "
                   "[px]")
 
@@ -70,8 +67,7 @@ def check_render_options(args: argparse.Namespace) -> None:
     from measurement.imaging.recording_checks import MAX_FRAMES, MAX_PIXELS
     integer_range("--frames", args.frames, 1, MAX_FRAMES,
                   "frames held in memory; the report's camera stores 3072 per run")
-    in_range("--fps", args.fps, 1.0, MAX_FPS, "frames/s",
-             "high-speed cameras record up to about 1e6 frames/s")
+    camera_fps("--fps", args.fps)
     size = getattr(args, "size", 256)
     if isinstance(size, int):
         integer_range("--size", size, 16, 4096, "frame width and height [px]")

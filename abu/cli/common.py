@@ -76,6 +76,13 @@ def positive(option: str, value: float | None, unit: str = "", *,
     return float(value)
 
 
+def camera_fps(option: str, value: float) -> float:
+    """A camera's frame rate [frames/s] in [1, MAX_CAMERA_FPS_HZ] (one limit for every command)."""
+    from abu_model.params import MAX_CAMERA_FPS_HZ
+    return in_range(option, value, 1.0, MAX_CAMERA_FPS_HZ, "frames/s",
+                    "a camera's frame rate; burst cameras record up to 1e7 frames/s")
+
+
 def in_range(option: str, value: float, low: float, high: float, unit: str = "",
              why: str = "") -> float:
     """``value`` if finite and low <= value <= high."""

@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import argparse
 import json
-
-import numpy as np
 import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from abu_model.errors import ParameterError
 
-from abu.cli.common import finite, in_range, integer_range, positive
+from abu.cli.common import camera_fps, finite, in_range, integer_range, positive
 
 HZ = 2.0 * math.pi
 #: the profile's speed cap without --speed-max-hz [Hz]: the benchmark's (bench_profile_drive.py
@@ -33,7 +33,7 @@ def profile_spec(args: argparse.Namespace, drive):
     from harness.planning.design_profile import ProfileDesignSpec
 
     lo, hi = (finite("--mu-range", v) for v in args.mu_range)
-    in_range("--fps", args.fps, 1.0, 1e6, "frames/s", "a camera's frame rate")
+    camera_fps("--fps", args.fps)
     integer_range("--frames", args.frames, 100, 100_000, "frames per record")
     from abu.cli.common import given
     speed_max = args.speed_max_hz if given(args, "--speed-max-hz") else SPEED_MAX_HZ

@@ -16,9 +16,8 @@ from typing import Any
 
 
 from abu_model.errors import ParameterError
-from abu_model.params import MAX_CAMERA_FPS_HZ
 
-from abu.cli.common import (add_figure_format, add_overwrite, finite, in_range, integer_range,
+from abu.cli.common import (add_figure_format, add_overwrite, camera_fps, finite, in_range, integer_range,
                             positive)
 
 HZ = 2.0 * math.pi
@@ -141,7 +140,7 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
     kwargs: dict[str, Any] = {}
     if drive is not None:
         kwargs["drive"] = drive
-    in_range("--fps", args.fps, 1.0, MAX_CAMERA_FPS_HZ, "frames/s", "a camera's frame rate")
+    camera_fps("--fps", args.fps)
     integer_range("--frames", args.frames, 2, 100_000, "frames per record; the search "
                   "evaluates every candidate on the record's time grid")
     in_range("--speed-max-hz", args.speed_max_hz, 1.0, 1000.0, "Hz",
