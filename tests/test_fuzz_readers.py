@@ -179,17 +179,13 @@ def test_summary_reader_on_mutated_files(tmp_path, text):
     assert lo == (data["mu_low"] or 0.0) and (hi == data["mu_high"] or data["mu_high"] is None)
 
 
-@settings(max_examples=25, **SETTINGS)
-@given(text=mutated_text(SUMMARY))
-def test_measure_summary_command_on_mutated_files(tmp_path_factory, text, capsys):
+def _exit_and_output(argv: list[str], out: Path, capsys):
+    """Run the command: (exit status, captured output) after checking the failure rule: exit 0
+    or 2, never a traceback; on 2 one line on stderr and nothing written at ``out``."""
     from abu.cli.main import main
 
-    d = tmp_path_factory.mktemp("fuzz_summary")
-    path = d / "summary.json"
-    path.write_text(text, encoding="utf-8")
-    out = d / "out"
     try:
-        code = main(["measure-summary", str(path), "--out", str(out), "--json"])
+        code = main(argv)
     except SystemExit as exc:
         code = exc.code
     captured = capsys.readouterr()
@@ -197,7 +193,19 @@ def test_measure_summary_command_on_mutated_files(tmp_path_factory, text, capsys
     assert "Traceback" not in captured.err
     if code == 2:
         assert len(captured.err.strip().splitlines()) == 1 and not out.exists()
-    else:
+    return code, captured
+
+
+@settings(max_examples=25, **SETTINGS)
+@given(text=mutated_text(SUMMARY))
+def test_measure_summary_command_on_mutated_files(tmp_path_factory, text, capsys):
+    d = tmp_path_factory.mktemp("fuzz_summary")
+    path = d / "summary.json"
+    path.write_text(text, encoding="utf-8")
+    out = d / "out"
+    code, captured = _exit_and_output(["measure-summary", str(path), "--out", str(out),
+                                       "--json"], out, capsys)
+    if code == 0:
         data = json.loads(text)
         result = json.loads(captured.out)
         assert result["union_hull"][0] == pytest.approx(data["mu_low"] or 0.0)
@@ -254,24 +262,15 @@ def test_pulses_reader_on_mutated_files(tmp_path, text):
 def test_identify_pulses_command_on_mutated_files(tmp_path_factory, text, capsys):
     """``abu identify --pulses`` on a damaged pulse file: exit 0 with a drive whose parameters
     are finite and positive, or exit 2 with one line and nothing written; never a traceback."""
-    from abu.cli.main import main
     from controller.drive import load_drive
-
     d = tmp_path_factory.mktemp("fuzz_pulses")
     (d / "pulses.csv").write_text(text, encoding="utf-8")
     (d / "setpoints.csv").write_text(SETPOINTS, encoding="utf-8")
     out = d / "out"
-    try:
-        code = main(["identify", "--pulses", str(d / "pulses.csv"), "--pulses-per-rev", "4",
-                     "--setpoints", str(d / "setpoints.csv"), "--out", str(out), "--json"])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    assert code in (0, 2), captured.err
-    assert "Traceback" not in captured.err
-    if code == 2:
-        assert len(captured.err.strip().splitlines()) == 1 and not out.exists()
-    else:
+    code, _ = _exit_and_output(["identify", "--pulses", str(d / "pulses.csv"),
+                                "--pulses-per-rev", "4", "--setpoints", str(d / "setpoints.csv"),
+                                "--out", str(out), "--json"], out, capsys)
+    if code == 0:
         drive = load_drive(out / "drive.json")
         for value in (drive.zeta, drive.omega_n, drive.tau_motor):
             assert np.isfinite(value) and value >= 0.0
