@@ -263,6 +263,7 @@ def test_identify_pulses_command_on_mutated_files(tmp_path_factory, text, capsys
     """``abu identify --pulses`` on a damaged pulse file: exit 0 with a drive whose parameters
     are finite and positive, or exit 2 with one line and nothing written; never a traceback."""
     from controller.drive import load_drive
+
     d = tmp_path_factory.mktemp("fuzz_pulses")
     (d / "pulses.csv").write_text(text, encoding="utf-8")
     (d / "setpoints.csv").write_text(SETPOINTS, encoding="utf-8")
