@@ -33,7 +33,7 @@ from controller.profile import Profile
 from harness.experiments.bounds import (ExperimentResult, _finish_summary, _switches, _table,
                                         friction_bounds)
 from harness.experiments.fmu_files import ensure_fmus
-from harness.experiments.staircase import ball_fields, plant_alone
+from harness.experiments.plant_alone import ball_fields, plant_alone
 from harness.cosim.reuse import run_system
 from harness.cosim.system import Source, System
 
