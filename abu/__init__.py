@@ -4,6 +4,11 @@ The public Python API is :mod:`abu.api` (``from abu import api``); the command l
 :mod:`abu.cli` (``abu --help``). SI units throughout (rad, rad/s, s, m, kg); speeds in Hz only
 where a name ends in ``_hz``.
 """
+import os
+
+# Before NumPy loads (every command starts here): one BLAS thread, as ``harness`` and
+# ``measurement`` set it for their library users; the reason is in ``measurement/__init__.py``.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def __getattr__(name: str):
