@@ -101,6 +101,17 @@ t = T(); plots.plot_analysis(res.table, res.summary, d)
 out["figures: build + draw + PNG"] = T() - t
 out["  of which draw (Agg)"] = inner.get("draw (Agg)", 0.0)
 out["  of which encode PNG"] = inner.get("png", 0.0) - inner.get("draw (Agg)", 0.0)
+# matplotlib's floor: the same two canvases (3 panels each, 150 dpi, the same PNG writer)
+# with one plain curve a panel and one axis label -- no legends, titles, bands or markers
+def bare_pair():
+    for size in ((7.5, 9.0), (8.0, 8.4)):
+        fig = matplotlib.figure.Figure(figsize=size)
+        FigureCanvasAgg(fig)
+        for ax in fig.subplots(3, 1):
+            ax.plot(res.table["time_s"], res.table["theta_rad"])
+            ax.set_ylabel("theta [rad]")
+        ff._png_bytes(fig)
+t = T(); bare_pair(); out["  matplotlib's floor: two bare 3-panel figures"] = T() - t
 for k, v in out.items():
     print(f"{k}\t{v}")
 print(f"(read + markers + tracking + gap filling through the pipeline: {pipe_track:.3f} s)",
@@ -203,6 +214,13 @@ def main() -> None:
             print(f"    {name:<44s} {float(value):6.3f} s = {float(value) / duration:5.2f} x "
                   "recording")
         print(f"    {'sum':<44s} {total:6.3f} s (interpreter start-up not included)")
+        stage = dict(r.split("\t") for r in proc.stdout.strip().splitlines())
+        floor = (statistics.median(r[1] for r in noplot)
+                 + float(stage["figures: import matplotlib"])
+                 + float(stage["  matplotlib's floor: two bare 3-panel figures"]))
+        print(f"  floor with matplotlib figures: --no-plots CPU median + matplotlib's import + "
+              f"two bare 3-panel figures = {floor:.3f} s = {floor / duration:.2f} x recording "
+              f"(issue 20's target with figures: 1.5 x)")
         print("    " + proc.stderr.strip())
 
 

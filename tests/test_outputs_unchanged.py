@@ -13,7 +13,7 @@ running max's stay under ``running_max``, compared there); ``abu design`` / ``ab
 their candidates by the predicted measured width (:data:`DESIGN_CHOSEN`). Issue 20's compiled
 tracker moved the tracked positions by <= 3e-7 px: the numbers computed from them are compared
 to a stated tolerance (:data:`TRACKED_OUTPUTS`); this checkout runs
-with ``InferenceOptions.drive_noise`` off (see :func:`_run`).
+with ``InferenceOptions.drive_noise`` off and no ``leftover_orders`` (see :func:`_run`).
 """
 from __future__ import annotations
 
@@ -78,10 +78,12 @@ def _run(tree: Path | None, cwd: Path, *args: str) -> str:
         # interval and what is computed from one (measure, measure-summary, design, next).
         # Old values cannot be mapped to new ones, so this checkout runs with it off here;
         # every other output must still match the old commit field by field.
+        # The same for the lighting orders 5-12 as random effects (leftover_orders,
+        # tests/test_lighting_leftover.py): off here.
         code = ("import sys; from measurement.inference import types\n"
                 "_init = types.InferenceOptions.__init__\n"
-                "def _off(self, *a, drive_noise=False, **k):\n"
-                "    _init(self, *a, drive_noise=drive_noise, **k)\n"
+                "def _off(self, *a, drive_noise=False, leftover_orders=(), **k):\n"
+                "    _init(self, *a, drive_noise=drive_noise, leftover_orders=leftover_orders, **k)\n"
                 "types.InferenceOptions.__init__ = _off\n"
                 "from abu.cli.main import main; sys.exit(main(sys.argv[1:]))")
         env["PYTHONPATH"] = str(ROOT)

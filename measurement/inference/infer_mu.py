@@ -58,6 +58,7 @@ from statistics import NormalDist
 from measurement.inference.types import LOST_ACROSS_SLIP, MU_D_RATIO, Inference, InferenceOptions  # noqa: F401
 from measurement.inference.noise_models import Gls as _Gls, ar1 as _ar1, leftover_whitener, long_run_factor  # noqa: F401
 from measurement.inference.noise_models import drive_noise_cov, leftover_whitener_of
+from measurement.inference.lighting_leftover import HarmonicLeftover, harmonic_leftover
 from measurement.inference.noise_models import noise_level  # noqa: F401 (re-exported)
 from measurement.inference import sup_noise  # noqa: F401
 from measurement.inference.slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
@@ -132,16 +133,20 @@ def _drive_cov(win: Window, models: SlipModelCache, mu: float, mu_d: float,
 def _fit_noise_model(win: Window, mu_grid: np.ndarray, ratios: np.ndarray,
                      profile: MuDProfile, noise: dict | None,
                      record_residual: np.ndarray | None, opt: InferenceOptions,
-                     drive: tuple[np.ndarray, np.ndarray | None] | None = None) -> _NoiseFit:
+                     drive: tuple[np.ndarray, np.ndarray | None] | None = None,
+                     lighting: HarmonicLeftover | None = None) -> _NoiseFit:
     """Profile under beta's noise model: the given one, else estimated from the residual of a
     first, white-noise fit (``ar1`` or ``leftover``; ``ar_order_max`` 0: white). ``drive``:
     (sigma_omega_dot [rad/s^2] over the record, its autocorrelation): with the leftover model,
-    the noise of the predicted slip from the best first-pass pair's onset is added."""
+    the noise of the predicted slip from the best first-pass pair's onset is added;
+    ``lighting``: the lighting orders beyond the fitted ones, as a random effect
+    (:mod:`lighting_leftover`)."""
     t, y, x = win.t, win.beta, win.x
     if noise is not None and opt.ar_order_max >= 1 and opt.noise_model == "leftover":
         # the sets of several kinematics windows share the record's noise model
         info = {k: noise[k] for k in ("sigma_white_rad", "sigma_leftover_rad", "leftover_tau_s")}
-        gls = _Gls(y, x, 0.0, leftover_whitener_of(info, t.size, float(t[1] - t[0])))
+        gls = _Gls(y, x, 0.0, leftover_whitener_of(info, t.size, float(t[1] - t[0]),
+                                                   None if lighting is None else lighting.cov()))
         rss, rbest = profile(mu_grid, gls, ratios)
         return _NoiseFit(gls, rss, rbest, 0.0, info)
     gls = _Gls(y, x, 0.0)
@@ -160,9 +165,13 @@ def _fit_noise_model(win: Window, mu_grid: np.ndarray, ratios: np.ndarray,
         b = int(np.argmin(rss))
         extra = _drive_cov(win, profile.models, float(mu_grid[b]), float(mu_grid[b] * rbest[b]),
                            drive)
+        if lighting is not None:
+            extra = lighting.cov() if extra is None else extra + lighting.cov()
         winv, info = leftover_whitener(y - fitted, float(t[1] - t[0]), record_residual=rec,
                                        extra_cov=extra)
         gls = _Gls(y, x, 0.0, winv)
+        if lighting is not None:
+            info["lighting_leftover_amp_rad"] = lighting.amplitudes_rad()
     else:
         gls = _Gls(y, x, rho)
     rss, _ = profile(mu_grid, gls, ratios)  # rbest stays the white-noise pass's
@@ -378,8 +387,15 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     models = SlipModelCache(win.t, win.q, win.omega, region.run_max, int(direction), d / l,
                             opt.max_episodes)
     profile = MuDProfile(models, opt.mu_d_refine)
+    lighting = None
+    orders = tuple(k for k in opt.leftover_orders if k not in opt.harmonic_orders)
+    if orders and opt.noise_model == "leftover" and record_residual is not None:
+        # phi = theta + beta, as the nuisance columns of the window (fit_window)
+        lighting = harmonic_leftover(np.asarray(theta, float) + np.asarray(beta, float),
+                                     record_residual, slice(win.i0, win.i0 + win.t.size), orders)
     fit = _fit_noise_model(win, mu_grid, ratios, profile, noise, record_residual, opt,
-                           (sigma_omega_dot, omega_dot_rho) if opt.drive_noise else None)
+                           (sigma_omega_dot, omega_dot_rho) if opt.drive_noise else None,
+                           lighting)
     lrf = _long_run_factor(win, fit, mu_grid, models, opt)
     mu_grid, rss = _refine_mu_grid(mu_grid, fit, lrf, win, ratios, profile, crit, opt)
     pset = _accepted_set(mu_grid, rss, lrf, win, crit)

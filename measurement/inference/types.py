@@ -56,6 +56,10 @@ class InferenceOptions:
             omega_dot's noise causes (q enters the slip's drive q - mu_d, a small difference
             near the onset; :func:`noise_models.drive_noise_cov`), from the onset of the first
             pass's best pair (False: the former fit, where that error moved the onset).
+        leftover_orders: harmonic orders of the ball's angle beyond ``harmonic_orders`` that
+            enter beta's noise covariance as random effects, each coefficient with the
+            variance of the order's squared amplitude in the record's residual
+            (:mod:`lighting_leftover`; () off).
     """
 
     confidence: float = 0.95
@@ -73,6 +77,7 @@ class InferenceOptions:
     mu_d_refine: int = 7
     theta_harmonic_rad: float = 8e-4
     drive_noise: bool = True
+    leftover_orders: tuple[int, ...] = (5, 6, 7, 8, 9, 10, 11, 12)
 
     def __post_init__(self) -> None:
         if not 0.5 <= float(self.confidence) < 1.0:
