@@ -116,45 +116,68 @@ def _combined_at(nxt: dict, mu: float) -> float:
     return rel(a, b) if b > a else 0.0
 
 
-def report(rows: list[dict], label: str, worst: int = 6) -> None:
+def _now(step: dict) -> dict[str, float]:
+    """next's predicted combined width for this step with the current rule (from the stored
+    table of the proposal's predicted widths; the stored ``predicted`` is what next printed)."""
+    from harness.planning.next_run import combined_width
+    tab = np.array(step["table"], dtype=float)       # null (a null bound) -> nan
+    return {key: combined_width(step["current"], tab[:, 0], np.nan_to_num(tab[:, j], nan=np.inf))
+            for j, key in enumerate(("expected", "low90", "high90"), start=1)}
+
+
+def _figures(m: np.ndarray, p: dict[str, np.ndarray]) -> str:
+    ratio = m / p["expected"]
+    band = (ratio >= RATIO_BAND[0]) & (ratio <= RATIO_BAND[1])
+    return (f"measured / predicted median {np.median(ratio):.3f}, 5-95 % "
+            f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
+            f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} %, inside the "
+            f"predicted 90 % range {100 * np.mean((m >= p['low90']) & (m <= p['high90'])):.1f} %")
+
+
+def report(rows: list[dict], label: str, worst: int = 5) -> None:
     """Print the figures of one slice of cases."""
-    print(f"{label}: {len(rows)} cases; run 1 finite in "
+    print(f"{label}: {len(rows)} cases; run 1 with finite bounds in "
           f"{sum(r['runs'][0].get('mu_high') is not None for r in rows)}")
     for k in (0, 1):
         st = [(r, r["steps"][k]) for r in rows if len(r["steps"]) > k
-              and r["steps"][k].get("measured") and r["steps"][k].get("predicted", {})
-              .get("expected")]
-        failed = len(rows) - len(st)
+              and r["steps"][k].get("measured") and r["steps"][k]["predicted"]["expected"]]
+        print(f"  after {k + 1} run(s): {len(st)} complete, {len(rows) - len(st)} not "
+              "(a null bound, next or measure failed)")
         if not st:
-            print(f"  after {k + 1} run(s): no complete step ({failed} failed)")
             continue
         m = np.array([rel(*s["measured"]) for _, s in st])
-        p = np.array([s["predicted"]["expected"] for _, s in st])
-        pm = np.array([s["at_mu"] for _, s in st])
-        lo90 = np.array([s["predicted"]["low90"] for _, s in st])
-        hi90 = np.array([s["predicted"]["high90"] for _, s in st])
+        now = [_now(s) for _, s in st]
+        p = {key: np.array([x[key] for x in now]) for key in now[0]}
+        old = {key: np.array([s["predicted"][key] for _, s in st]) for key in now[0]}
         cur = np.array([rel(*s["current"]) for _, s in st])
-        ratio = m / p
-        band = (ratio >= RATIO_BAND[0]) & (ratio <= RATIO_BAND[1])
-        cov = np.mean([s["measured"][0] <= r["mu"] <= s["measured"][1] for r, s in st])
-        print(f"  after {k + 1} run(s) ({len(st)} complete, {failed} not): measured / predicted "
-              f"combined width median {np.median(ratio):.3f}, 5-95 % "
-              f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
-              f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} %; inside the "
-              f"predicted 90 % range {100 * np.mean((m >= lo90) & (m <= hi90)):.1f} %; "
-              f"with next's rule at the true mu: median {np.median(m / np.maximum(pm, 1e-12)):.3f}"
-              f", within band {100 * np.mean(np.abs(np.log(m / np.maximum(pm, 1e-12))) <= math.log(1.3)):.1f} %")
-        print(f"    coverage of the combined interval {100 * cov:.1f} %; median widths: before "
-              f"{100 * np.median(cur):.1f} %, predicted {100 * np.median(p):.1f} %, measured "
-              f"{100 * np.median(m):.1f} %")
-        order = np.argsort(-np.abs(np.log(ratio)))[:worst]
+        print(f"    combined width, current rule: {_figures(m, p)}")
+        print(f"    as next printed when run: {_figures(m, old)}; the former rule at the true mu:"
+              f" median ratio {np.median(m / np.array([s['at_mu'] for _, s in st])):.3f}")
+        print(f"    coverage of the combined interval "
+              f"{100 * np.mean([s['measured'][0] <= r['mu'] <= s['measured'][1] for r, s in st]):.1f}"
+              f" %; median widths: before {100 * np.median(cur):.1f} %, predicted "
+              f"{100 * np.median(p['expected']):.1f} %, measured {100 * np.median(m):.1f} %")
+        order = np.argsort(-np.abs(np.log(m / p["expected"])))[:worst]
         print("    worst: " + "; ".join(
-            f"seed {st[i][0]['seed']} {st[i][0]['drive']} mu {st[i][0]['mu']:.4g} "
-            f"mu_d/mu {st[i][0]['mu_d'] / st[i][0]['mu']:.2f}: before {100 * cur[i]:.1f} %, "
-            f"P {100 * p[i]:.1f} %, M {100 * m[i]:.1f} %" for i in order))
+            f"seed {st[i][0]['seed']} {st[i][0]['drive']} mu {st[i][0]['mu']:.4g} mu_d/mu "
+            f"{st[i][0]['mu_d'] / st[i][0]['mu']:.2f}: before {100 * cur[i]:.1f} %, predicted "
+            f"{100 * p['expected'][i]:.1f} %, measured {100 * m[i]:.1f} %" for i in order))
     cpu = [r["cpu_s"] for r in rows if "cpu_s" in r]
     if cpu:
-        print(f"  CPU time per case: median {np.median(cpu):.0f} s (shared machine)")
+        print(f"  CPU time per case (three renders and measurements, two next): median "
+              f"{np.median(cpu):.0f} s, max {np.max(cpu):.0f} s (shared machine)")
+
+
+def calibrate(rows: list[dict]) -> None:
+    """Print where the true mu lies in the combined interval before each next, as the fraction
+    (mu - L) / (H - L): mean and standard deviation (next_run.POSITION_MEAN, POSITION_SD)."""
+    for k in (0, 1):
+        x = np.array([(r["mu"] - s["current"][0]) / (s["current"][1] - s["current"][0])
+                      for r in rows if len(r["steps"]) > k for s in [r["steps"][k]]
+                      if s.get("current")])
+        print(f"after {k + 1} run(s), {x.size} cases: mu at the fraction {x.mean():.3f} "
+              f"(sd {x.std(ddof=1):.3f}, 5-95 % {np.percentile(x, 5):.2f}-"
+              f"{np.percentile(x, 95):.2f}) of the combined interval")
 
 
 def main() -> None:
@@ -163,8 +186,14 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=36, help="chains of three runs")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--rows", default=None, help="write the rows as JSON lines here")
-    ap.add_argument("--report", default=None, help="print the figures of saved rows and exit")
+    ap.add_argument("--report", default=None, help="print the figures of saved rows and exit "
+                                                   "(predicted with the current rule)")
+    ap.add_argument("--calibrate", default=None, help="print where mu lies in the combined "
+                                                      "intervals of saved rows and exit")
     a = ap.parse_args()
+    if a.calibrate:
+        calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
+        return
     if a.report:
         rows = [json.loads(x) for x in Path(a.report).read_text().splitlines() if x]
     else:
