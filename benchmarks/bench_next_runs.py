@@ -119,10 +119,24 @@ def _combined_at(nxt: dict, mu: float) -> float:
 def _now(step: dict) -> dict[str, float]:
     """next's predicted combined width for this step with the current rule (from the stored
     table of the proposal's predicted widths; the stored ``predicted`` is what next printed)."""
-    from harness.planning.next_run import combined_width
+    from harness.planning.next_run import RANGE_QUANTILES, combined_width
     tab = np.array(step["table"], dtype=float)       # null (a null bound) -> nan
-    return {key: combined_width(step["current"], tab[:, 0], np.nan_to_num(tab[:, j], nan=np.inf))
-            for j, key in enumerate(("expected", "low90", "high90"), start=1)}
+    return {key: combined_width(step["current"], tab[:, 0], np.nan_to_num(tab[:, j], nan=np.inf),
+                                quantile=q)
+            for j, (key, q) in enumerate(RANGE_QUANTILES.items(), start=1)}
+
+
+def _former(step: dict) -> dict[str, float]:
+    """The former rule: mean over next's log-spaced mu grid of [L, H] of [L, H] intersected
+    with mu [1 - w/2, 1 + w/2] (mu anywhere in [L, H], the next interval centred on it)."""
+    tab = np.array(step["table"], dtype=float)
+    lo, hi = step["current"]
+    out = {}
+    for j, key in enumerate(("expected", "low90", "high90"), start=1):
+        w = np.minimum(np.nan_to_num(tab[:, j], nan=2.0), 2.0)
+        a, b = np.maximum(lo, tab[:, 0] * (1 - w / 2)), np.minimum(hi, tab[:, 0] * (1 + w / 2))
+        out[key] = float(np.mean((b - a) / (0.5 * (a + b))))
+    return out
 
 
 def _figures(m: np.ndarray, p: dict[str, np.ndarray]) -> str:
@@ -148,10 +162,11 @@ def report(rows: list[dict], label: str, worst: int = 5) -> None:
         m = np.array([rel(*s["measured"]) for _, s in st])
         now = [_now(s) for _, s in st]
         p = {key: np.array([x[key] for x in now]) for key in now[0]}
-        old = {key: np.array([s["predicted"][key] for _, s in st]) for key in now[0]}
+        old = [_former(s) for _, s in st]
+        old = {key: np.array([x[key] for x in old]) for key in now[0]}
         cur = np.array([rel(*s["current"]) for _, s in st])
         print(f"    combined width, current rule: {_figures(m, p)}")
-        print(f"    as next printed when run: {_figures(m, old)}; the former rule at the true mu:"
+        print(f"    the former rule: {_figures(m, old)}; at the true mu:"
               f" median ratio {np.median(m / np.array([s['at_mu'] for _, s in st])):.3f}")
         print(f"    coverage of the combined interval "
               f"{100 * np.mean([s['measured'][0] <= r['mu'] <= s['measured'][1] for r, s in st]):.1f}"

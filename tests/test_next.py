@@ -86,6 +86,10 @@ def test_combined_width_keeps_mu_near_the_middle_of_the_interval():
     assert combined_width((lo, hi), grid, np.full(25, rel / 50)) == pytest.approx(rel / 50,
                                                                                  rel=1e-3)
     assert combined_width((lo, hi), grid, np.full(25, 20 * rel)) == pytest.approx(rel, rel=1e-3)
+    # the 90 % range spans where mu lies: quantiles around the expected width
+    lo90 = combined_width((lo, hi), grid, np.full(25, rel), quantile=0.05)
+    hi90 = combined_width((lo, hi), grid, np.full(25, rel), quantile=0.95)
+    assert lo90 < 0.75 * rel < same < hi90 <= rel * (1 + 1e-12)
     # a null bound (inf) gains nothing
     assert combined_width((0.02, 0.04), np.geomspace(0.02, 0.04, 25),
                           np.full(25, np.inf)) == pytest.approx(2 / 3, rel=1e-9)

@@ -17,9 +17,11 @@ actual error seldom reaches, and the lower one takes the Rice sup quantile (abou
 1.96 above), so mu sits a little above the middle of each interval, and of their intersection,
 and rarely near an end. The prediction averages over mu at the fraction x of [L, H] and the new
 interval holding mu at the fraction p of its width, x and p independent normal with the
-measured :data:`POSITION_MEAN` and :data:`POSITION_SD` (truncated to [0, 1]). (The former rule,
-the mean over a log-uniform mu in [L, H] of a new interval centred on mu, predicted 0.87x the
-combined width measured on rendered chains of runs: ``benchmarks/bench_next_runs.py``.)
+measured :data:`POSITION_MEAN` and :data:`POSITION_SD` (truncated to [0, 1]); the 90 % range
+is the 5 % quantile over (x, p) with the run's ``low90`` width and the 95 % one with its
+``high90``. (The former rule, the mean over a log-uniform mu in [L, H] of a new interval
+centred on mu, predicted combined widths 0.87x the ones measured on rendered chains of runs,
+``benchmarks/bench_next_runs.py``; at the true mu it was unbiased.)
 """
 from __future__ import annotations
 
@@ -55,14 +57,18 @@ def combine(intervals: Sequence[dict[str, Any]]) -> tuple[float, float]:
 #: and 0.13 after one run, 0.55 and 0.12 after two).
 POSITION_MEAN = 0.56
 POSITION_SD = 0.13
+#: the 90 % range: the 5 % quantile over where mu lies with the run's low90 width, the 95 %
+#: one with its high90 width (the spread of mu's position widens it, as it does the measured)
+RANGE_QUANTILES = {"expected": None, "low90": 0.05, "high90": 0.95}
 #: quadrature nodes per position (x in [L, H], p in the new interval) on [0, 1]
 _NODES = 41
 
 
 def combined_width(current: tuple[float, float], mu: np.ndarray, width: np.ndarray,
-                   mean: float = POSITION_MEAN, sd: float = POSITION_SD) -> float:
+                   mean: float = POSITION_MEAN, sd: float = POSITION_SD,
+                   quantile: float | None = None) -> float:
     """Expected relative width (hi - lo) / mid of [L, H] intersected with the next run's
-    interval [-].
+    interval [-]; with ``quantile``, that quantile of it over where mu lies.
 
     Args:
         current: the combined interval so far [L, H] [-].
@@ -85,7 +91,11 @@ def combined_width(current: tuple[float, float], mu: np.ndarray, width: np.ndarr
     a = np.where(null[:, None], lo, np.maximum(lo, m[:, None] - p * span))
     b = np.where(null[:, None], hi, np.minimum(hi, m[:, None] + (1.0 - p) * span))
     rel = (b - a) / (0.5 * (a + b))
-    return float(weight @ rel @ weight)
+    if quantile is None:
+        return float(weight @ rel @ weight)
+    order = np.argsort(rel, axis=None)
+    cum = np.cumsum(np.outer(weight, weight).ravel()[order])
+    return float(rel.ravel()[order][min(np.searchsorted(cum, quantile), cum.size - 1)])
 
 
 @dataclass
@@ -103,8 +113,8 @@ class Proposal:
         pred = self.design.width
         if pred is None:
             return {"expected": None, "low90": None, "high90": None}
-        return {key: combined_width(self.current, self.design.mu, getattr(pred, key))
-                for key in ("expected", "low90", "high90")}
+        return {key: combined_width(self.current, self.design.mu, getattr(pred, key),
+                                    quantile=q) for key, q in RANGE_QUANTILES.items()}
 
     @property
     def worst_combined_width(self) -> float:
