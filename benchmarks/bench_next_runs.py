@@ -168,9 +168,9 @@ def report(rows: list[dict], label: str, worst: int = 5) -> None:
         print(f"    combined width, current rule: {_figures(m, p)}")
         print(f"    the former rule: {_figures(m, old)}; at the true mu:"
               f" median ratio {np.median(m / np.array([s['at_mu'] for _, s in st])):.3f}")
-        print(f"    coverage of the combined interval "
-              f"{100 * np.mean([s['measured'][0] <= r['mu'] <= s['measured'][1] for r, s in st]):.1f}"
-              f" %; median widths: before {100 * np.median(cur):.1f} %, predicted "
+        cov = np.mean([s["measured"][0] <= r["mu"] <= s["measured"][1] for r, s in st])
+        print(f"    coverage of the combined interval {100 * cov:.1f} %; median widths: before "
+              f"{100 * np.median(cur):.1f} %, predicted "
               f"{100 * np.median(p['expected']):.1f} %, measured {100 * np.median(m):.1f} %")
         order = np.argsort(-np.abs(np.log(m / p["expected"])))[:worst]
         print("    worst: " + "; ".join(

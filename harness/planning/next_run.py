@@ -73,7 +73,8 @@ def combined_width(current: tuple[float, float], mu: np.ndarray, width: np.ndarr
     Args:
         current: the combined interval so far [L, H] [-].
         mu, width: the next run's predicted ``abu measure`` relative width ``width`` at the
-            grid ``mu`` of [L, H] (interpolated in log mu; from 2 on, e.g. inf: a null bound, nothing gained).
+            grid ``mu`` of [L, H] (interpolated in log mu; from 2 on, e.g. inf: a null bound,
+            nothing gained).
         mean, sd: where mu lies in a measured interval, as a fraction of its width.
     """
     lo, hi = current
