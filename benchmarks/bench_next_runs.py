@@ -14,10 +14,14 @@ kept for all three runs of the case (one set-up, a new sensor noise per run). Th
 
 Printed per slice: the share of M / P in [0.77, 1.3] after one and two runs, the share of M
 inside next's predicted 90 % range, the coverage of the combined intervals, median widths and
-the worst cases. Run (two worker processes, nice; about 4 min of CPU per case)::
+the worst cases, and beside them the former rule on the same rows. ``next_run.POSITION_MEAN``
+and ``POSITION_SD`` (where mu lies in a measured interval) were measured on seeds 0-47
+(``--calibrate``); seeds 1000 on were not used for them. Run (two worker processes, nice;
+15-20 s of CPU per case)::
 
-    nice python benchmarks/bench_next_runs.py --cases 36 --first 1000 --jobs 2 --rows v.jsonl
-    python benchmarks/bench_next_runs.py --report v.jsonl     # figures of saved rows
+    nice python benchmarks/bench_next_runs.py --cases 40 --first 1000 --jobs 2 --rows v.jsonl
+    python benchmarks/bench_next_runs.py --report v.jsonl      # figures of saved rows
+    python benchmarks/bench_next_runs.py --calibrate c.jsonl   # where mu lies (seeds 0-47)
 """
 from __future__ import annotations
 
@@ -168,6 +172,12 @@ def report(rows: list[dict], label: str, worst: int = 5) -> None:
         print(f"    combined width, current rule: {_figures(m, p)}")
         print(f"    the former rule: {_figures(m, old)}; at the true mu:"
               f" median ratio {np.median(m / np.array([s['at_mu'] for _, s in st])):.3f}")
+        own = np.array([r["runs"][k + 1]["relative_width"] / np.interp(
+            math.log(r["mu"]), np.log(np.array(s["table"], float)[:, 0]),
+            np.array(s["table"], float)[:, 1]) for r, s in st])
+        print(f"    the next run's own width / its prediction at the true mu: median "
+              f"{np.median(own):.3f}, within the band "
+              f"{100 * np.mean((own >= RATIO_BAND[0]) & (own <= RATIO_BAND[1])):.1f} %")
         cov = np.mean([s["measured"][0] <= r["mu"] <= s["measured"][1] for r, s in st])
         print(f"    coverage of the combined interval {100 * cov:.1f} %; median widths: before "
               f"{100 * np.median(cur):.1f} %, predicted "
