@@ -102,35 +102,49 @@ def staircase_drive(design: dict, drive: Drive) -> DriveSpec:
                      tau_motor=drive.tau_motor, setpoint_weight=drive.setpoint_weight)
 
 
+def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, dict, dict]:
+    """Render the designed staircase on the drive with the scenario's ball, lighting, lens and
+    sensor, and measure it into ``out`` with ``abu measure``: (exit status, the scenario as
+    rendered and its true state, the summary or {})."""
+    frames_n = int(round(design["record_s"] * design["fps_hz"])) + 1
+    scn = replace(scn, drive=staircase_drive(design, DRIVES[drive_name]), n_frames=frames_n,
+                  predicted_slip_s=None)
+    state, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, state, pos)
+    out.mkdir(parents=True, exist_ok=True)
+    rec = out / "rec.npy"
+    np.save(rec, frames)
+    args = ["measure", str(rec), "--out", str(out / "m"), "--quiet", "--no-plots",
+            "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
+    if scn.lighting.reflections == 2:
+        args += ["--ball-reflections", "2"]
+    with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+        status = abu_main(args)
+    rec.unlink()
+    summary = json.loads((out / "m" / "summary.json").read_text()) if status == 0 else {}
+    return status, {"scenario": scn, "state": state}, summary
+
+
 def one(job: tuple) -> dict:
     """Render and measure one designed run; its row (measured and predicted)."""
     seed, mu_range, drive_name, design = job
     mu, mu_d = draw(seed, mu_range)
     frames_n = int(round(design["record_s"] * design["fps_hz"])) + 1
     scn = random_scenario(seed, n_frames=max(frames_n, 1000))
-    scn = replace(scn, drive=staircase_drive(design, DRIVES[drive_name]), n_frames=frames_n,
-                  ball=replace(scn.ball, mu=mu, mu_d=mu_d), predicted_slip_s=None)
-    state, pos = simulate_scenario(scn)
-    frames = render_scenario_frames(scn, state, pos)
+    scn = replace(scn, ball=replace(scn.ball, mu=mu, mu_d=mu_d))
+    with tempfile.TemporaryDirectory() as tmp:
+        status, truth, s = render_measure(scn, design, drive_name, Path(tmp))
+    state = truth["state"]
     row = {"seed": seed, "mu_range": list(mu_range), "drive": drive_name, "mu": mu,
            "mu_d": mu_d, "design": {k: design[k] for k in (
                "omega0_hz", "omega_end_hz", "t0_s", "te_s", "rounding", "step_hz", "fps_hz",
                "frames", "record_s")},
            "t_slip_true": float(state["switches"][0]) if len(state["switches"]) else None,
            "reflections": int(scn.lighting.reflections),
-           "exposure_fraction": scn.optics.exposure_fraction, "pixel_size_m": scn.pixel_size}
-    with tempfile.TemporaryDirectory() as tmp:
-        rec = Path(tmp) / "rec.npy"
-        np.save(rec, frames)
-        args = ["measure", str(rec), "--out", str(Path(tmp) / "m"), "--quiet", "--no-plots",
-                "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
-        if scn.lighting.reflections == 2:
-            args += ["--ball-reflections", "2"]
-        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
-            row["exit"] = abu_main(args)
-        if row["exit"] != 0:
-            return row
-        s = json.loads((Path(tmp) / "m" / "summary.json").read_text())
+           "exposure_fraction": scn.optics.exposure_fraction, "pixel_size_m": scn.pixel_size,
+           "exit": status}
+    if status != 0:
+        return row
     mf, nz = s.get("model_fit") or {}, s.get("noise") or {}
     row.update({k: s.get(k) for k in ("mu_low", "mu_high", "relative_width", "status",
                                       "t_slip")})
