@@ -177,11 +177,11 @@ def main() -> None:
     print(f"{'method':<19} {'time [s]':>9} {'frames/s':>9} {'x camera':>9} {'x baseline':>11}"
           f"  RMS error [px] centre, CD, ball   lost")
     kernel = track_passes._trackc
-    step = TrackingOptions(edge_step=True)
+    plain = TrackingOptions(edge_step=False)
     runs = [(m + (" *" if m == "isocontour" else ""), m, kernel, None) for m in METHODS]
     runs[1:1] = [("isocontour (NumPy)", "isocontour", None, None),
-                 ("isocontour + edge", "isocontour", kernel, step),
-                 ("iso. + edge (NumPy)", "isocontour", None, step)]
+                 ("iso., no edge step", "isocontour", kernel, plain),
+                 ("no edge st. (NumPy)", "isocontour", None, plain)]
     for label, method, use, opts in runs:
         track_passes._trackc = use
         try:
@@ -194,7 +194,8 @@ def main() -> None:
         print(f"{label:<19} {t_m:9.3f} {fps:9.0f} {fps / CAMERA_FPS:9.2f} "
               f"{t_base / t_m:11.2f}  {np.array2string(err, precision=4):<30} "
               f"{int(tracks.lost.sum())}")
-    print("* default method; '+ edge': --edge-step (TrackingOptions(edge_step=True)). "
+    print("* default method (isocontour with its edge step); 'no edge step': --no-edge-step "
+          "(TrackingOptions(edge_step=False)). "
           "'x camera' > 1: faster than the camera records; 'x baseline': "
           "speed relative to the plain cv2.moments tracker (which has no lost-marker tests). "
           "Times: CPU time of the best of the repeats. Compiled kernels: "

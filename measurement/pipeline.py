@@ -58,7 +58,10 @@ class TrackingSettings:
         ball_method: with two reflections, ``outline`` or ``pair``.
         progress: progress bar on stderr while tracking.
         edge_step: end the ``isocontour`` method with its edge-model step
-            (:mod:`measurement.imaging.edge_step`).
+            (:mod:`measurement.imaging.edge_step`); None (the default): on with one
+            reflection on the ball, off with two
+            (:func:`measurement.imaging.reflections.edge_step_default`). ``summary.json``
+            states what was used (``input.edge_step``; ``tracking.json`` of ``abu track``).
     """
 
     seeds_px: np.ndarray | None = None
@@ -68,7 +71,7 @@ class TrackingSettings:
     ball_reflections: int = 1
     ball_method: str = "outline"
     progress: bool = False
-    edge_step: bool = False
+    edge_step: bool | None = None
 
 
 @dataclass

@@ -361,14 +361,15 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
 
     Returns :class:`tracking.Tracks` with the three markers in the usual order; the ball's
     ``radius`` column holds the outline radius (``outline``) or the reflections' separation
-    (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``.
+    (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``. ``options`` None: the
+    defaults with the edge step as :func:`edge_step_default` says (off).
     """
     if dark:
         raise ParameterError("--dark-markers", True, "bright markers with --ball-reflections 2")
     seeds = np.asarray(seeds, dtype=float)
     if seeds.shape != (3, 2):
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
-    opts = options or T.TrackingOptions()
+    opts = options or T.TrackingOptions(edge_step=edge_step_default(2))
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
     X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
                                  radius_px=radius_px, window=window, options=opts)
@@ -384,15 +385,32 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
                     method=f"{method}+{used}", window=window, dark=False, options=opts)
 
 
+def edge_step_default(ball_reflections: int) -> bool:
+    """Whether the command line's tracker ends the ``isocontour`` fits with the edge step
+    (:mod:`measurement.imaging.edge_step`) when the user says neither ``--edge-step`` nor
+    ``--no-edge-step``: yes with one reflection on the ball (all three markers are disks the
+    step's model fits), no with two.
+
+    With two reflections the ball is measured by its outline (never by the step) and its
+    error, 0.06-0.2 px RMS on the harsh twin, is 2-10x the centre's and CD marker's, which the
+    twin's motion blur and lens leave at 0.015-0.05 px with or without the step: there the
+    step gains nothing measurable, and on the unseen seeds 3000-3099 it moved two of their
+    intervals off mu (3011: missed by 16.8 -> 40.0 %, 3038: held -> missed by 27.1 %;
+    ``benchmarks/bench_coverage.py``), so it stays off (``--edge-step`` turns it on)."""
+    return ball_reflections == 1
+
+
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
                   window: int = T.DEFAULT_WINDOW, dark: bool = False, progress: bool = False,
                   ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD,
-                  edge_step: bool = False) -> "T.Tracks":
+                  edge_step: bool | None = None) -> "T.Tracks":
     """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
     = 1 (the default), :func:`track_with_reflections` for 2; ``edge_step`` as
-    :class:`tracking.TrackingOptions`."""
+    :class:`tracking.TrackingOptions`, None: :func:`edge_step_default`."""
     if ball_reflections not in (1, 2):
         raise ParameterError("--ball-reflections", ball_reflections, "1 or 2")
+    if edge_step is None:
+        edge_step = edge_step_default(ball_reflections)
     opts = T.TrackingOptions(edge_step=bool(edge_step))
     if ball_reflections == 1:
         return T.track_recording(frames, seeds, method=method, window=window, dark=dark,
