@@ -10,16 +10,16 @@ Issue 20's target: >= 30,000 frames/s on one core at <= 0.012 px RMS error on ev
 (``time.process_time``) of the best of ``--repeats`` calls; on a shared machine compare the
 'x baseline' column (the plain cv2.moments tracker timed in the same run).
 
-The default method runs the compiled kernels (``measurement/imaging/_trackc.c``, built by
-``pip install -e .``); the row 'isocontour (NumPy)' is the same method on its NumPy/OpenCV
-fallback (same positions to 1e-9 px); '+ edge' rows add the optional edge step
-(``--edge-step``). Measured (3072 frames, CPU time, the machine shared with other jobs at load
-~12 on two cores): the default 49,900 frames/s (1.12x the plain cv2.moments tracker's 44,500
-in the same run, 11x the camera) at 0.0109 / 0.0123 / 0.0102 px RMS (centre, CD, ball); with
-the edge step 37,100 frames/s (0.84x; 0.78-0.84x in three runs) at 0.0077 / 0.0100 / 0.0083
-px: the target is met with the edge step, on every marker. NumPy fallback 10,600 frames/s
-(5,300 with the step). Before the kernels: 15,300 frames/s (0.39x the cv2.moments tracker's
-39,500 in that run).
+The default method (isocontour with its edge step) runs the compiled kernels
+(``measurement/imaging/_trackc.c``, built by ``pip install -e .``); the row 'isocontour
+(NumPy)' is the same method on its NumPy/OpenCV fallback (same positions to 1e-9 px); 'no edge
+step' rows leave the edge step out (``--no-edge-step``). Measured (3072 frames, CPU time, the
+machine shared with other jobs at load ~5-7 on two cores): the default 36,250 frames/s (0.90x
+the plain cv2.moments tracker's 40,090 in the same run, 8.1x the camera) at 0.0077 / 0.0100 /
+0.0083 px RMS (centre, CD, ball): the target is met on every marker. Without the edge step
+48,620 frames/s (1.21x) at 0.0109 / 0.0123 / 0.0102 px (the CD marker misses 0.012 px). NumPy
+fallback 5,800 frames/s (13,300 without the step). Before the kernels: 15,300 frames/s (0.39x
+the cv2.moments tracker's 39,500 in that run).
 
 The recording is rendered by twin.render (3072 frames of 256x256 px, three markers, the
 report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the
