@@ -187,7 +187,7 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
                            "on the edge pixels (17-30 %% less RMS error on rendered markers). "
                            "Default: on with --ball-reflections 1 (centre, CD and ball "
                            "markers), off with 2 (the ball is measured by its outline); this "
-                           "option turns it on with 2 as well")
+                           "option turns it on with 2 for the centre and CD markers")
     step.add_argument("--no-edge-step", action="store_true",
                       help="isocontour: the contour's circle fit alone, without the edge step")
     p.add_argument("--ball-reflections", type=int, choices=[1, 2], default=1,
