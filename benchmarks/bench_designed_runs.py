@@ -63,6 +63,9 @@ DRIVES = {"report loop": Drive(),
           "PI 15 ms b 0.8": Drive("pi-lag-weighted", 0.9, 20.0, 0.015, 0.8),
           "PI 25 ms b 0.6": Drive("pi-lag-weighted", 0.8, 15.0, 0.025, 0.6)}
 RATIO_BAND = (0.77, 1.3)
+#: Options added to every ``abu measure`` of the designed runs (``--no-edge-step``: the
+#: tracker the width model was calibrated with, see tests/test_width_model.py).
+EXTRA_MEASURE_ARGS: list[str] = []
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -126,6 +129,7 @@ def one(job: tuple) -> dict:
                 "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
         if scn.lighting.reflections == 2:
             args += ["--ball-reflections", "2"]
+        args += EXTRA_MEASURE_ARGS
         with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
             row["exit"] = abu_main(args)
         if row["exit"] != 0:

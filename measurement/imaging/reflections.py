@@ -391,12 +391,14 @@ def edge_step_default(ball_reflections: int) -> bool:
     ``--no-edge-step``: yes with one reflection on the ball (all three markers are disks the
     step's model fits), no with two.
 
-    With two reflections the ball is measured by its outline (never by the step) and its
-    error, 0.06-0.2 px RMS on the harsh twin, is 2-10x the centre's and CD marker's, which the
-    twin's motion blur and lens leave at 0.015-0.05 px with or without the step: there the
-    step gains nothing measurable, and on the unseen seeds 3000-3099 it moved two of their
-    intervals off mu (3011: missed by 16.8 -> 40.0 %, 3038: held -> missed by 27.1 %;
-    ``benchmarks/bench_coverage.py``), so it stays off (``--edge-step`` turns it on)."""
+    With two reflections the ball is measured by its outline (never by the step); its error,
+    0.04-0.33 px RMS on the harsh twin (median 0.10), dominates beta. The centre's and CD
+    marker's, 0.014-0.067 px under the twin's motion blur and lens, the step hardly changes
+    there (33 two-reflection recordings: medians 0.0256 -> 0.0253 px and 0.0366 -> 0.0354 px,
+    better in about half), and on the unseen seeds 3000-3099 it moved two of their intervals
+    off mu (3011: missed by 16.8 -> 40.0 %, 3038: held -> missed by 27.1 %;
+    ``benchmarks/bench_coverage.py``; docs/measurement-imaging.md, "Where it is the default"),
+    so it stays off (``--edge-step`` turns it on for the centre and CD markers)."""
     return ball_reflections == 1
 
 
