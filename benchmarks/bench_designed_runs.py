@@ -64,7 +64,7 @@ DRIVES = {"report loop": Drive(),
           "PI 25 ms b 0.6": Drive("pi-lag-weighted", 0.8, 15.0, 0.025, 0.6)}
 RATIO_BAND = (0.77, 1.3)
 #: Options added to every ``abu measure`` of the designed runs (``--no-edge-step``: the
-#: tracker the width model was calibrated with, see tests/test_width_model.py).
+#: contour fits alone, the tracker the width model was calibrated with).
 EXTRA_MEASURE_ARGS: list[str] = []
 MU_D_RATIO = (0.6, 1.0)
 
@@ -262,7 +262,12 @@ def main() -> None:
                                                       "rows of this file and exit")
     ap.add_argument("--report", default=None, help="print the figures of the rows of this file "
                                                    "(predicted with the current constants)")
+    ap.add_argument("--no-edge-step", action="store_true",
+                    help="measure with 'abu measure --no-edge-step' (the contour fits alone, "
+                         "as when the width model was calibrated)")
     a = ap.parse_args()
+    if a.no_edge_step:   # before the worker pool forks
+        EXTRA_MEASURE_ARGS.append("--no-edge-step")
     if a.calibrate:
         calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
         return

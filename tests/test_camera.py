@@ -14,7 +14,6 @@ import pytest
 
 from measurement.imaging import camera as cam_mod
 from measurement.imaging import camera_calibration as calib
-from measurement.inference.types import InferenceOptions
 from twin.calibration_target import render_views, undistort_map
 from abu.cli.main import main
 from twin.optics import OpticsSpec, distort, half_diagonal
@@ -210,25 +209,15 @@ def rendered(tmp_path_factory):
 def test_measure_with_the_camera_is_narrower_and_holds_mu(rendered, tmp_path, capsys):
     """abu calibrate-camera on the twin's views, then abu measure with and without --camera:
     every interval holds the true mu; with the camera the theta-harmonic prior is the
-    calibration's and the intervals are narrower (each of the three).
-
-    The recordings are tracked as when these seeds were chosen, by the contour fits alone
-    (``--no-edge-step``). With the tracker's edge step (the default) rec11's plain interval
-    narrows from 200 % to 75 % and the camera's to 88 %, not below the plain one: its
-    calibration's prior (9.3e-4 rad) is looser than the family's 8e-4 rad. So with the default
-    every interval must hold mu, and the camera's be the narrower where its prior is the
-    tighter (rec5, rec23)."""
+    calibration's and the intervals are narrower (each of the three)."""
     widths = []
-    family_prior = InferenceOptions().theta_harmonic_rad
     for rec in rendered:
         meta = json.loads((rec / "meta.json").read_text())
         mu, l = meta["mu"], meta["geometry"]["l_m"]
         cam = tmp_path / f"{rec.name}.json"
         assert main(["calibrate-camera", str(rec / "calibration"), "--out", str(cam)]) == 0
         s = {}
-        for tag, extra in (("plain", ["--no-edge-step"]),
-                           ("camera", ["--no-edge-step", "--camera", str(cam)]),
-                           ("default", []), ("default_camera", ["--camera", str(cam)])):
+        for tag, extra in (("plain", []), ("camera", ["--camera", str(cam)])):
             out = tmp_path / f"{rec.name}_{tag}"
             assert main(["measure", str(rec), "--out", str(out), "--no-plots", "--quiet",
                          "--l", repr(l), *extra]) == 0
@@ -239,17 +228,16 @@ def test_measure_with_the_camera_is_narrower_and_holds_mu(rendered, tmp_path, ca
         w = {t: s[t]["relative_width"] for t in s}
         widths.append((w["plain"], w["camera"]))
         with capsys.disabled():
-            print(f"{rec.name}: mu {mu:.5f}; " + "; ".join(
-                f"{t} [{s[t]['mu_low']:.5f}, {s[t]['mu_high']:.5f}] width {100 * w[t]:.1f} %"
-                for t in s) + f", prior {prior:.1e} rad, calibration RMS "
-                f"{c['reprojection_rms_px']:.3f} px")
+            print(f"{rec.name}: mu {mu:.5f}; plain [{s['plain']['mu_low']:.5f}, "
+                  f"{s['plain']['mu_high']:.5f}] width {100 * w['plain']:.1f} %; camera "
+                  f"[{s['camera']['mu_low']:.5f}, {s['camera']['mu_high']:.5f}] width "
+                  f"{100 * w['camera']:.1f} %, prior {prior:.1e} rad, calibration RMS "
+                  f"{c['reprojection_rms_px']:.3f} px")
         assert c["file"] == str(cam) and c["reprojection_rms_px"] < 0.08
         assert 0 < prior < 2e-3
         for t in s:
             assert s[t]["status"] == "ok" and s[t]["mu_low"] <= mu <= s[t]["mu_high"], (rec, t)
-        assert "camera" not in s["plain"] and "camera" not in s["default"]
-        if prior < family_prior:
-            assert w["default_camera"] < w["default"], rec
+        assert "camera" not in s["plain"]
     assert all(cam_w < plain_w for plain_w, cam_w in widths)
     # tracks.csv keeps the tracker's (distorted) positions: --tracks --camera repeats the result
     again = tmp_path / "again"

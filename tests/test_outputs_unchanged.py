@@ -14,7 +14,7 @@ their candidates by the predicted measured width (:data:`DESIGN_CHOSEN`). Issue 
 tracker moved the tracked positions by <= 3e-7 px: the numbers computed from them are compared
 to a stated tolerance (:data:`TRACKED_OUTPUTS`); this checkout runs
 with ``InferenceOptions.drive_noise`` off (see :func:`_run`). Issue 20's edge step, on by
-default for one-reflection recordings, moves tracked positions by ~0.02 px: every command runs
+default for the centre and CD markers, moves their positions by ~0.02 px: every command runs
 with it off here, and ``abu track``'s default output is compared apart, its positions and
 angles to the tolerances :data:`EDGE_STEP_PX` / :data:`EDGE_STEP_RAD`.
 """
@@ -52,9 +52,10 @@ TRACKED_OUTPUTS = ("stdout of measure-tracks", "stdout of measure-summary", "std
 TRACKED_JSON_REL = 1e-4
 TRACKED_PX = 1e-6
 #: Issue 20: the tracker's edge step (measurement/imaging/edge_step.py) is on by default for
-#: one-reflection recordings (measurement.imaging.reflections.edge_step_default). It moves
-#: each tracked position by one least-squares step (measured on the demo's twin recording:
-#: <= 0.020 px, RMS 0.005 px; theta <= 2.7e-4 rad, beta <= 7.3e-4 rad), and every interval
+#: the centre and CD markers of one-reflection recordings
+#: (measurement.imaging.edge_step_roles.edge_step_default). It moves their tracked positions
+#: by one least-squares step (measured on the demo's twin recording, the step on all three
+#: markers: <= 0.020 px, RMS 0.005 px; theta <= 2.7e-4 rad, beta <= 7.3e-4 rad), and every interval
 #: computed from them moves in a way no mapping predicts. So every command runs here with the
 #: edge step off (the old default, see :func:`_run`), and ``abu track``'s default output is
 #: compared apart (:func:`_compare_edge_step_tracks`): positions (``*_px``) within
@@ -100,7 +101,7 @@ def _run(tree: Path | None, cwd: Path, *args: str, edge_step_default: bool = Fal
                 "types.InferenceOptions.__init__ = _off\n"
                 + ("" if edge_step_default else
                    "from measurement.imaging import reflections\n"
-                   "reflections.edge_step_default = lambda ball_reflections: False\n")
+                   "reflections.edge_step_default = lambda ball_reflections: (False,) * 3\n")
                 + "from abu.cli.main import main; sys.exit(main(sys.argv[1:]))")
         env["PYTHONPATH"] = str(ROOT)
     else:

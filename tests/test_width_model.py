@@ -131,11 +131,6 @@ def test_rendered_designed_runs_measure_the_predicted_width():
     the benchmark's band [0.77, 1.3] (68 % of them are; these three are, seeds fixed before
     they were run)."""
     bench = _bench()
-    # The width model's constants (width_model.CALIBRATED) were fitted to runs tracked by the
-    # contour fits alone: measured as then. With the tracker's edge step (the default since)
-    # the tracking noise is lower and seed 2002 measures 11.1 % against 16.8 % predicted
-    # (90 %: 12.0-36.7 %): the constants need fitting again to the default's runs.
-    bench.EXTRA_MEASURE_ARGS[:] = ["--no-edge-step"]
     ratios = []
     for seed, mu_range, drive in RENDERED:
         design = bench.run_design(mu_range, drive, [])

@@ -185,9 +185,9 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
     step.add_argument("--edge-step", action="store_true",
                       help="isocontour: end with one least-squares step of a blurred-disk model "
                            "on the edge pixels (17-30 %% less RMS error on rendered markers). "
-                           "Default: on with --ball-reflections 1 (centre, CD and ball "
-                           "markers), off with 2 (the ball is measured by its outline); this "
-                           "option turns it on with 2 for the centre and CD markers")
+                           "Default: on the centre and CD markers with --ball-reflections 1, "
+                           "off with 2; never on the ball's outline (2). This option turns it "
+                           "on for every marker the contour fit measures")
     step.add_argument("--no-edge-step", action="store_true",
                       help="isocontour: the contour's circle fit alone, without the edge step")
     p.add_argument("--ball-reflections", type=int, choices=[1, 2], default=1,

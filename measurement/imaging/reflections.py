@@ -38,6 +38,7 @@ import numpy as np
 from abu_model.errors import ParameterError
 
 from measurement.imaging import tracking as T
+from measurement.imaging.edge_step_roles import edge_step_default, track_by_step
 from measurement.imaging import window_fits as W
 from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
 
@@ -362,14 +363,15 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
     Returns :class:`tracking.Tracks` with the three markers in the usual order; the ball's
     ``radius`` column holds the outline radius (``outline``) or the reflections' separation
     (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``. ``options`` None: the
-    defaults with the edge step as :func:`edge_step_default` says (off).
+    defaults with the edge step as
+    :func:`measurement.imaging.edge_step_roles.edge_step_default` says (off).
     """
     if dark:
         raise ParameterError("--dark-markers", True, "bright markers with --ball-reflections 2")
     seeds = np.asarray(seeds, dtype=float)
     if seeds.shape != (3, 2):
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
-    opts = options or T.TrackingOptions(edge_step=edge_step_default(2))
+    opts = options or T.TrackingOptions(edge_step=any(edge_step_default(2)))
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
     X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
                                  radius_px=radius_px, window=window, options=opts)
@@ -380,26 +382,11 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
     T._post_checks(Xa, Ya, Ra, reasons, window, opts, check_radius=False)
     lost = reasons != T.OK
     nan = np.nan
+    step = bool(opts.edge_step) and method == "isocontour"
     return T.Tracks(x=np.where(lost, nan, Xa), y=np.where(lost, nan, Ya), lost=lost,
                     reason=reasons, radius=np.where(lost, nan, Ra),
-                    method=f"{method}+{used}", window=window, dark=False, options=opts)
-
-
-def edge_step_default(ball_reflections: int) -> bool:
-    """Whether the command line's tracker ends the ``isocontour`` fits with the edge step
-    (:mod:`measurement.imaging.edge_step`) when the user says neither ``--edge-step`` nor
-    ``--no-edge-step``: yes with one reflection on the ball (all three markers are disks the
-    step's model fits), no with two.
-
-    With two reflections the ball is measured by its outline (never by the step); its error,
-    0.04-0.33 px RMS on the harsh twin (median 0.10), dominates beta. The centre's and CD
-    marker's, 0.014-0.067 px under the twin's motion blur and lens, the step hardly changes
-    there (33 two-reflection recordings: medians 0.0256 -> 0.0253 px and 0.0366 -> 0.0354 px,
-    better in about half), and on the unseen seeds 3000-3099 it moved two of their intervals
-    off mu (3011: missed by 16.8 -> 40.0 %, 3038: held -> missed by 27.1 %;
-    ``benchmarks/bench_coverage.py``; docs/measurement-imaging.md, "Where it is the default"),
-    so it stays off (``--edge-step`` turns it on for the centre and CD markers)."""
-    return ball_reflections == 1
+                    method=f"{method}+{used}", window=window, dark=False, options=opts,
+                    edge_step_markers=(step, step, False))
 
 
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
@@ -408,11 +395,16 @@ def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFA
                   edge_step: bool | None = None) -> "T.Tracks":
     """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
     = 1 (the default), :func:`track_with_reflections` for 2; ``edge_step`` as
-    :class:`tracking.TrackingOptions`, None: :func:`edge_step_default`."""
+    :class:`tracking.TrackingOptions`, None: per marker as
+    :func:`measurement.imaging.edge_step_roles.edge_step_default` says."""
     if ball_reflections not in (1, 2):
         raise ParameterError("--ball-reflections", ball_reflections, "1 or 2")
     if edge_step is None:
-        edge_step = edge_step_default(ball_reflections)
+        steps = edge_step_default(ball_reflections)
+        if ball_reflections == 1 and len(seeds) == len(steps) and len(set(steps)) > 1:
+            return track_by_step(frames, np.asarray(seeds, dtype=float), steps, method=method,
+                                  window=window, dark=dark, progress=progress)
+        edge_step = any(steps)
     opts = T.TrackingOptions(edge_step=bool(edge_step))
     if ball_reflections == 1:
         return T.track_recording(frames, seeds, method=method, window=window, dark=dark,

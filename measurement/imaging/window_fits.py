@@ -42,12 +42,10 @@ class TrackingOptions:
         edge_step: end the ``isocontour`` method with one Gauss-Newton step of a blurred-disk
             model on the pixels near the edge (:mod:`measurement.imaging.edge_step`): 17-30 %
             less RMS error on rendered markers (the CD marker of the bench recording 0.0123 ->
-            0.0100 px, its Cramer-Rao bound 0.0089 px). On by default for every marker this
-            method measures: the centre and CD paper disks and a ball with one highlight. The
-            ball under two reflections is measured by its outline
-            (:mod:`measurement.imaging.reflections`), never by this step; there the command
-            line's tracker turns the step off for the other markers too
-            (:func:`measurement.imaging.reflections.edge_step_default`).
+            0.0100 px, its Cramer-Rao bound 0.0089 px). On by default here; the command
+            line's tracker applies it to the centre and CD paper disks of a one-reflection
+            recording only, never to the ball, whose image is a highlight or an outline, not a
+            uniform disk (:func:`measurement.imaging.edge_step_roles.edge_step_default`).
         edge_width_px: the model's edge blur s (normal CDF) [px].
     """
 
