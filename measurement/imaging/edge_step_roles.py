@@ -28,7 +28,7 @@ def edge_step_default(ball_reflections: int) -> tuple[bool, bool, bool]:
 
 
 def track_by_step(frames: np.ndarray, seeds: np.ndarray, steps: tuple[bool, ...], *,
-                   method: str, window: int, dark: bool, progress: bool) -> "T.Tracks":
+                  method: str, window: int, dark: bool, progress: bool) -> "T.Tracks":
     """:func:`tracking.track_recording` with the edge step on the markers ``steps`` names:
     one call per setting (the markers are tracked independently: the same positions as one
     call), the columns in the seeds' order."""
@@ -45,4 +45,5 @@ def track_by_step(frames: np.ndarray, seeds: np.ndarray, steps: tuple[bool, ...]
     first = parts[steps[0]]
     return T.Tracks(x=column("x"), y=column("y"), lost=column("lost"), reason=column("reason"),
                     radius=column("radius"), method=method, window=first.window, dark=bool(dark),
-                    options=first.options, edge_step_markers=tuple(steps))
+                    options=first.options,
+                    edge_step_markers=tuple(bool(on) and method == "isocontour" for on in steps))

@@ -403,7 +403,7 @@ def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFA
         steps = edge_step_default(ball_reflections)
         if ball_reflections == 1 and len(seeds) == len(steps) and len(set(steps)) > 1:
             return track_by_step(frames, np.asarray(seeds, dtype=float), steps, method=method,
-                                  window=window, dark=dark, progress=progress)
+                                 window=window, dark=dark, progress=progress)
         edge_step = any(steps)
     opts = T.TrackingOptions(edge_step=bool(edge_step))
     if ball_reflections == 1:
