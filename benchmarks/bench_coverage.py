@@ -24,7 +24,8 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
 
     nice python benchmarks/bench_coverage.py --n 200 --out /tmp/cov
     nice python benchmarks/bench_coverage.py --n 200 --camera --out /tmp/cov_cam
-    nice python benchmarks/bench_coverage.py --n 200 --edge-step   # the tracker's edge step
+    nice python benchmarks/bench_coverage.py --n 200 --no-edge-step  # contour fits alone
+    nice python benchmarks/bench_coverage.py --n 200 --edge-step  # the edge step on every disk
     nice python benchmarks/bench_coverage.py --n 100 --first 2000 --two-spot 20 --alt-two-spot 40 \
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
     nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
@@ -57,7 +58,8 @@ from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
 
-#: Options added to every ``abu measure`` of the rendered recordings (``--edge-step``).
+#: Options added to every ``abu measure`` of the rendered recordings (``--edge-step``,
+#: ``--no-edge-step``).
 EXTRA_MEASURE_ARGS: list[str] = []
 #: theta's harmonic prior without a camera file (the family prior).
 THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
@@ -380,8 +382,12 @@ def main() -> None:
                          "(twin.lighting_alt; seeds after the forced two-spot ones)")
     ap.add_argument("--size", type=int, default=256, help="frame size [px]")
     ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
-    ap.add_argument("--edge-step", action="store_true",
-                    help="track with 'abu measure --edge-step' (the edge-model step)")
+    step = ap.add_mutually_exclusive_group()
+    step.add_argument("--edge-step", action="store_true",
+                      help="track with 'abu measure --edge-step' (the edge-model step also on "
+                           "the centre and CD markers of two-reflection recordings)")
+    step.add_argument("--no-edge-step", action="store_true",
+                      help="track with 'abu measure --no-edge-step' (the contour fits alone)")
     ap.add_argument("--camera", action="store_true",
                     help="per recording: render chessboard views through its optics, "
                          "'abu calibrate-camera', then 'abu measure --camera'")
@@ -397,8 +403,8 @@ def main() -> None:
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
-    if args.edge_step:
-        EXTRA_MEASURE_ARGS.append("--edge-step")
+    if args.edge_step or args.no_edge_step:
+        EXTRA_MEASURE_ARGS.append("--edge-step" if args.edge_step else "--no-edge-step")
     if args.summarize:
         rows = [json.loads(line) for line in open(args.summarize)]
         print(f"{len(rows)} recordings from {args.summarize}")
@@ -454,7 +460,8 @@ def main() -> None:
           f"two-spot of the second highlight model), {args.size} px, "
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"
-             if args.camera else "no camera calibration (family prior on theta's harmonic)"))
+             if args.camera else "no camera calibration (family prior on theta's harmonic)")
+          + f"; abu measure options added: {' '.join(EXTRA_MEASURE_ARGS) or 'none (defaults)'}")
     report(rows, "all recordings")
     report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
     report([r for r in rows if r["reflections"] == 2], "two reflections (--ball-reflections 2)")

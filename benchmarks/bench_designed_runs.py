@@ -63,6 +63,9 @@ DRIVES = {"report loop": Drive(),
           "PI 15 ms b 0.8": Drive("pi-lag-weighted", 0.9, 20.0, 0.015, 0.8),
           "PI 25 ms b 0.6": Drive("pi-lag-weighted", 0.8, 15.0, 0.025, 0.6)}
 RATIO_BAND = (0.77, 1.3)
+#: Options added to every ``abu measure`` of the designed runs (``--no-edge-step``: the
+#: contour fits alone, the tracker the width model was calibrated with).
+EXTRA_MEASURE_ARGS: list[str] = []
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -118,6 +121,7 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
     if scn.lighting.reflections == 2:
         args += ["--ball-reflections", "2"]
+    args += EXTRA_MEASURE_ARGS
     with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
         status = abu_main(args)
     rec.unlink()
@@ -272,7 +276,12 @@ def main() -> None:
                                                       "rows of this file and exit")
     ap.add_argument("--report", default=None, help="print the figures of the rows of this file "
                                                    "(predicted with the current constants)")
+    ap.add_argument("--no-edge-step", action="store_true",
+                    help="measure with 'abu measure --no-edge-step' (the contour fits alone, "
+                         "as when the width model was calibrated)")
     a = ap.parse_args()
+    if a.no_edge_step:   # before the worker pool forks
+        EXTRA_MEASURE_ARGS.append("--no-edge-step")
     if a.calibrate:
         calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
         return

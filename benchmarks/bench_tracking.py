@@ -10,16 +10,19 @@ Issue 20's target: >= 30,000 frames/s on one core at <= 0.012 px RMS error on ev
 (``time.process_time``) of the best of ``--repeats`` calls; on a shared machine compare the
 'x baseline' column (the plain cv2.moments tracker timed in the same run).
 
-The default method runs the compiled kernels (``measurement/imaging/_trackc.c``, built by
-``pip install -e .``); the row 'isocontour (NumPy)' is the same method on its NumPy/OpenCV
-fallback (same positions to 1e-9 px); '+ edge' rows add the optional edge step
-(``--edge-step``). Measured (3072 frames, CPU time, the machine shared with other jobs at load
-~12 on two cores): the default 49,900 frames/s (1.12x the plain cv2.moments tracker's 44,500
-in the same run, 11x the camera) at 0.0109 / 0.0123 / 0.0102 px RMS (centre, CD, ball); with
-the edge step 37,100 frames/s (0.84x; 0.78-0.84x in three runs) at 0.0077 / 0.0100 / 0.0083
-px: the target is met with the edge step, on every marker. NumPy fallback 10,600 frames/s
-(5,300 with the step). Before the kernels: 15,300 frames/s (0.39x the cv2.moments tracker's
-39,500 in that run).
+The default is the command line's tracker (``reflections.track_markers``: isocontour, the edge
+step on the centre and CD markers, not on the ball) on the compiled kernels
+(``measurement/imaging/_trackc.c``, built by ``pip install -e .``); the row 'isocontour (NumPy)'
+is the same on the NumPy/OpenCV fallback (same positions to 1e-9 px); 'step on all' is
+``--edge-step``, 'no edge step' ``--no-edge-step``. Measured (3072 frames, CPU time, the
+machine shared with other jobs at load ~5-8 on two cores): the default 39,240 frames/s (0.88x
+the plain cv2.moments tracker's 44,730 in the same run, 8.7x the camera) at 0.0077 / 0.0100 /
+0.0102 px RMS (centre, CD, ball): the target is met on every marker. The step on all three
+37,240 frames/s (0.83x) at 0.0077 / 0.0100 / 0.0083 px (this recording's ball is a rendered
+disk, which the step suits; the real ball's highlight is not); without the step 49,580
+frames/s (1.11x) at 0.0109 / 0.0123 / 0.0102 px (the CD marker misses 0.012 px). NumPy
+fallback 7,600 frames/s (12,500 without the step). Before the kernels: 15,300 frames/s (0.39x
+the cv2.moments tracker's 39,500 in that run).
 
 The recording is rendered by twin.render (3072 frames of 256x256 px, three markers, the
 report's staircase motion, noise sigma 3 grey levels), so every method's accuracy against the
@@ -45,6 +48,7 @@ from measurement.imaging.frames_io import (read_recording, write_frame_folder,  
                                    write_multipage_tiff, write_npy)
 from twin.render import CameraGeometry, RenderSettings, render_frames  # noqa: E402
 from measurement.imaging import track_passes  # noqa: E402
+from measurement.imaging.reflections import track_markers  # noqa: E402
 from measurement.imaging.tracking import (METHODS, TrackingOptions,  # noqa: E402
                                           track_recording)
 
@@ -166,7 +170,7 @@ def main() -> None:
             print(f"read folder of {n} PNG files: {t_dir:.3f} s = {n / t_dir:.0f} frames/s")
 
     # warm up imports and caches outside the timings
-    track_recording(frames[:64], seeds)
+    track_markers(frames[:64], seeds)
     plain_moments_tracker(frames[:64], seeds)
 
     t_base, base = best_time(lambda: plain_moments_tracker(frames, seeds), args.repeats)
@@ -177,16 +181,21 @@ def main() -> None:
     print(f"{'method':<19} {'time [s]':>9} {'frames/s':>9} {'x camera':>9} {'x baseline':>11}"
           f"  RMS error [px] centre, CD, ball   lost")
     kernel = track_passes._trackc
-    step = TrackingOptions(edge_step=True)
-    runs = [(m + (" *" if m == "isocontour" else ""), m, kernel, None) for m in METHODS]
-    runs[1:1] = [("isocontour (NumPy)", "isocontour", None, None),
-                 ("isocontour + edge", "isocontour", kernel, step),
-                 ("iso. + edge (NumPy)", "isocontour", None, step)]
+    plain, every = TrackingOptions(edge_step=False), TrackingOptions(edge_step=True)
+    runs = [(m, m, kernel, plain) for m in METHODS]
+    runs[0:1] = [("isocontour *", "default", kernel, None),
+                 ("isocontour (NumPy)", "default", None, None),
+                 ("iso., step on all", "isocontour", kernel, every),
+                 ("iso., no edge step", "isocontour", kernel, plain),
+                 ("no edge st. (NumPy)", "isocontour", None, plain)]
     for label, method, use, opts in runs:
         track_passes._trackc = use
         try:
-            t_m, tracks = best_time(lambda: track_recording(frames, seeds, method=method,
-                                                            options=opts), args.repeats)
+            if method == "default":   # the command line's tracker: the step on centre and CD
+                t_m, tracks = best_time(lambda: track_markers(frames, seeds), args.repeats)
+            else:
+                t_m, tracks = best_time(lambda: track_recording(frames, seeds, method=method,
+                                                                options=opts), args.repeats)
         finally:
             track_passes._trackc = kernel
         err = rms_error(tracks.x, tracks.y, truth)
@@ -194,7 +203,9 @@ def main() -> None:
         print(f"{label:<19} {t_m:9.3f} {fps:9.0f} {fps / CAMERA_FPS:9.2f} "
               f"{t_base / t_m:11.2f}  {np.array2string(err, precision=4):<30} "
               f"{int(tracks.lost.sum())}")
-    print("* default method; '+ edge': --edge-step (TrackingOptions(edge_step=True)). "
+    print("* default: the command line's tracker (isocontour, the edge step on the centre and "
+          "CD markers, not on the ball); 'step on all': --edge-step; 'no edge step': "
+          "--no-edge-step. "
           "'x camera' > 1: faster than the camera records; 'x baseline': "
           "speed relative to the plain cv2.moments tracker (which has no lost-marker tests). "
           "Times: CPU time of the best of the repeats. Compiled kernels: "
@@ -214,7 +225,7 @@ def bench_trackpy(frames: np.ndarray, seeds: np.ndarray, truth: np.ndarray,
     sub = frames[:n_frames]
     trackpy_tracker(sub[:4], seeds)           # warm up (imports, pandas)
     t_tp, tp_xy = best_time(lambda: trackpy_tracker(sub, seeds), 1)
-    ours_t, ours = best_time(lambda: track_recording(sub, seeds), 3)
+    ours_t, ours = best_time(lambda: track_markers(sub, seeds), 3)
     err = rms_error(tp_xy[:, :, 0], tp_xy[:, :, 1], truth[:n_frames])
     err_ours = rms_error(ours.x, ours.y, truth[:n_frames])
     print(f"\ntrackpy {trackpy.__version__} (locate, diameter 15 px, whole frames) on the first "
@@ -240,7 +251,7 @@ def bench_two_reflections(repeats: int, seed: int = 12) -> None:
     true = pos["ball"]
     print(f"\ntwo reflections on the ball (harsh twin seed {seed}, two_spot lighting, "
           f"{frames.shape[0]} frames of {frames.shape[2]}x{frames.shape[1]} px, one core):")
-    runs = {"default": lambda: track_recording(frames, seeds),
+    runs = {"default": lambda: track_markers(frames, seeds),
             "outline": lambda: track_with_reflections(frames, seeds, ball_method="outline"),
             "pair": lambda: track_with_reflections(frames, seeds, ball_method="pair")}
     times: dict[str, list[float]] = {k: [] for k in runs}

@@ -58,7 +58,11 @@ class TrackingSettings:
         ball_method: with two reflections, ``outline`` or ``pair``.
         progress: progress bar on stderr while tracking.
         edge_step: end the ``isocontour`` method with its edge-model step
-            (:mod:`measurement.imaging.edge_step`).
+            (:mod:`measurement.imaging.edge_step`); None (the default): on the centre and CD
+            markers with one reflection on the ball, never on the ball, off with two
+            (:func:`measurement.imaging.edge_step_roles.edge_step_default`). ``summary.json``
+            states what was used (``input.edge_step``, ``input.edge_step_markers``;
+            ``tracking.json`` of ``abu track``).
     """
 
     seeds_px: np.ndarray | None = None
@@ -68,7 +72,7 @@ class TrackingSettings:
     ball_reflections: int = 1
     ball_method: str = "outline"
     progress: bool = False
-    edge_step: bool = False
+    edge_step: bool | None = None
 
 
 @dataclass
@@ -245,7 +249,8 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
             "roles": list(ROLES), "method": tracks.method, "window_px": tracks.window,
-            "edge_step": bool(tracks.options.edge_step),
+            "edge_step": any(tracks.stepped()),
+            "edge_step_markers": [r for r, on in zip(ROLES, tracks.stepped()) if on],
             **_rate_info(rec, rate), "frames": int(time.size),
             "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
             "lost_reasons": tracks.lost_summary(),

@@ -61,7 +61,8 @@ def _tracking_settings(args: argparse.Namespace) -> TrackingSettings:
     return TrackingSettings(seeds_px=seeds, dark_markers=args.dark_markers, method=args.method,
                             window_px=args.window, ball_reflections=args.ball_reflections,
                             ball_method=args.ball_method, progress=args.progress,
-                            edge_step=args.edge_step)
+                            edge_step=(True if args.edge_step else
+                                       False if args.no_edge_step else None))
 
 
 # ------------------------------------------------------------------------------ track
@@ -180,9 +181,15 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="isocontour",
                    help="centre-finding method: isocontour (default), report, moments")
     p.add_argument("--window", type=int, default=30, help="tracking window [px] (default 30)")
-    p.add_argument("--edge-step", action="store_true",
-                   help="isocontour: end with one least-squares step of a blurred-disk model "
-                        "on the edge pixels (17-30 %% less RMS error on rendered markers)")
+    step = p.add_mutually_exclusive_group()
+    step.add_argument("--edge-step", action="store_true",
+                      help="isocontour: end with one least-squares step of a blurred-disk model "
+                           "on the edge pixels (17-30 %% less RMS error on rendered markers). "
+                           "Default: on the centre and CD markers with --ball-reflections 1, "
+                           "off with 2; never on the ball's outline (2). This option turns it "
+                           "on for every marker the contour fit measures")
+    step.add_argument("--no-edge-step", action="store_true",
+                      help="isocontour: the contour's circle fit alone, without the edge step")
     p.add_argument("--ball-reflections", type=int, choices=[1, 2], default=1,
                    help="bright reflections on the ball: 1 (default; one marker at the ball) "
                         "or 2 (the report's two-spot lighting, sec. 5.2)")

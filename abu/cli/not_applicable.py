@@ -19,7 +19,7 @@ Rule = tuple[str, Callable[[argparse.Namespace], bool], tuple[str, ...], str]
 
 _STAIRCASE = ("--omega-end-hz", "--t0", "--te", "--step-hz", "--rounding")
 _TRACKING = ("--seeds", "--dark-markers", "--method", "--window", "--ball-reflections",
-             "--ball-method", "--progress", "--edge-step")
+             "--ball-method", "--progress", "--edge-step", "--no-edge-step")
 _DRIVE_SETS = ("--zeta", "--omega-n", "--tau-motor")
 #: Options of the render's report scenario that --scenario random draws from --seed.
 RENDER_REPORT_ONLY = ("--mu", "--omega0-hz", "--omega-end-hz", "--t0", "--te", "--fps",

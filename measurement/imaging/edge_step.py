@@ -1,6 +1,8 @@
-"""One Gauss-Newton step of an edge model on the marker's disk (the optional last step of the
+"""One Gauss-Newton step of an edge model on the marker's disk (the last step of the
 ``isocontour`` method, :mod:`measurement.imaging.window_fits`: ``TrackingOptions(edge_step=True)``,
-``abu measure --edge-step``).
+the default; the command line applies it to the centre and CD paper disks of one-reflection
+recordings, :func:`measurement.imaging.edge_step_roles.edge_step_default`, and ``abu measure
+--no-edge-step`` leaves it out).
 
 The contour fit uses ~30-60 interpolated points on one level of a smoothed window; it leaves
 0.010-0.012 px RMS at noise 3 on the rendered recordings, 1.3-1.4 x the Cramer-Rao bound of the

@@ -138,9 +138,12 @@ def detect_blobs(frame: np.ndarray, *, dark: bool = False, r_min: float = 2.0,
 
 
 def _refine(frame: np.ndarray, blobs: list[dict], dark: bool, window: int) -> None:
-    """Sub-pixel centres of the blobs with the tracker's default method (in place)."""
-    from measurement.imaging.tracking import measure_windows
+    """Sub-pixel centres of the blobs with the tracker's default method (in place), without
+    its edge step: a seed only places the first window, and the seeds stated in tracking.json
+    / summary.json stay the same whether the tracking takes the step or not."""
+    from measurement.imaging.tracking import TrackingOptions, measure_windows
 
+    plain = TrackingOptions(edge_step=False)
     h, w = frame.shape
     half = window // 2
     for b in blobs:
@@ -148,7 +151,8 @@ def _refine(frame: np.ndarray, blobs: list[dict], dark: bool, window: int) -> No
         y0 = int(round(b["y"])) - half
         if x0 < 0 or y0 < 0 or x0 + window > w or y0 + window > h:
             continue
-        x, y, r, code = measure_windows(frame[None, y0:y0 + window, x0:x0 + window], dark=dark)
+        x, y, r, code = measure_windows(frame[None, y0:y0 + window, x0:x0 + window], dark=dark,
+                                        options=plain)
         if code[0] == 0:
             b["x"], b["y"], b["radius"] = x0 + float(x[0]), y0 + float(y[0]), float(r[0])
 

@@ -38,6 +38,7 @@ import numpy as np
 from abu_model.errors import ParameterError
 
 from measurement.imaging import tracking as T
+from measurement.imaging.edge_step_roles import edge_step_default, track_by_step
 from measurement.imaging import window_fits as W
 from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
 
@@ -361,14 +362,16 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
 
     Returns :class:`tracking.Tracks` with the three markers in the usual order; the ball's
     ``radius`` column holds the outline radius (``outline``) or the reflections' separation
-    (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``.
+    (``pair``) [px]; ``method`` reads e.g. ``isocontour+outline``. ``options`` None: the
+    defaults with the edge step as
+    :func:`measurement.imaging.edge_step_roles.edge_step_default` says (off).
     """
     if dark:
         raise ParameterError("--dark-markers", True, "bright markers with --ball-reflections 2")
     seeds = np.asarray(seeds, dtype=float)
     if seeds.shape != (3, 2):
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
-    opts = options or T.TrackingOptions()
+    opts = options or T.TrackingOptions(edge_step=any(edge_step_default(2)))
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
     X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
                                  radius_px=radius_px, window=window, options=opts)
@@ -379,20 +382,29 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
     T._post_checks(Xa, Ya, Ra, reasons, window, opts, check_radius=False)
     lost = reasons != T.OK
     nan = np.nan
+    step = bool(opts.edge_step) and method == "isocontour"
     return T.Tracks(x=np.where(lost, nan, Xa), y=np.where(lost, nan, Ya), lost=lost,
                     reason=reasons, radius=np.where(lost, nan, Ra),
-                    method=f"{method}+{used}", window=window, dark=False, options=opts)
+                    method=f"{method}+{used}", window=window, dark=False, options=opts,
+                    edge_step_markers=(step, step, False))
 
 
 def track_markers(frames: np.ndarray, seeds: np.ndarray, *, method: str = T.DEFAULT_METHOD,
                   window: int = T.DEFAULT_WINDOW, dark: bool = False, progress: bool = False,
                   ball_reflections: int = 1, ball_method: str = DEFAULT_BALL_METHOD,
-                  edge_step: bool = False) -> "T.Tracks":
+                  edge_step: bool | None = None) -> "T.Tracks":
     """The command line's tracker: :func:`tracking.track_recording` for ``ball_reflections``
     = 1 (the default), :func:`track_with_reflections` for 2; ``edge_step`` as
-    :class:`tracking.TrackingOptions`."""
+    :class:`tracking.TrackingOptions`, None: per marker as
+    :func:`measurement.imaging.edge_step_roles.edge_step_default` says."""
     if ball_reflections not in (1, 2):
         raise ParameterError("--ball-reflections", ball_reflections, "1 or 2")
+    if edge_step is None:
+        steps = edge_step_default(ball_reflections)
+        if ball_reflections == 1 and len(seeds) == len(steps) and len(set(steps)) > 1:
+            return track_by_step(frames, np.asarray(seeds, dtype=float), steps, method=method,
+                                 window=window, dark=dark, progress=progress)
+        edge_step = any(steps)
     opts = T.TrackingOptions(edge_step=bool(edge_step))
     if ball_reflections == 1:
         return T.track_recording(frames, seeds, method=method, window=window, dark=dark,

@@ -17,10 +17,12 @@ How it works (two passes, chunk by chunk of frames, :mod:`measurement.imaging.tr
      additive lighting gradient), smooth with a 3x3 binomial kernel, take the 50 % iso-contour
      of the bilinear interpolation of the pixels (its vertices are the sub-pixel crossings of
      the level on the pixel grid's edges, as in marching squares), fit a circle algebraically
-     (Kasa), reject outlier points, fit again. Optionally (``TrackingOptions(edge_step=True)``,
-     ``--edge-step``) one least-squares (Gauss-Newton) step of a blurred-disk model on the
-     unsmoothed pixels near the edge then moves the centre (:mod:`measurement.imaging.edge_step`:
-     17-30 % less RMS error).
+     (Kasa), reject outlier points, fit again. Then (``TrackingOptions(edge_step=True)``, the
+     default; off with ``TrackingOptions(edge_step=False)`` or ``--no-edge-step``) one
+     least-squares (Gauss-Newton) step of a blurred-disk model on the unsmoothed pixels near
+     the edge moves the centre (:mod:`measurement.imaging.edge_step`: 17-30 % less RMS
+     error). The command line's tracker applies it to the centre and CD paper disks of a
+     one-reflection recording only (:func:`measurement.imaging.edge_step_roles.edge_step_default`).
    * ``report``: the report's method (appendix B): several contour levels between percentage
      bounds of the window's min..max grey levels (no lighting correction), a circle fit to each
      contour, the centres averaged. MATLAB's ``contour`` interpolates linearly, so the contour
@@ -35,11 +37,13 @@ with the same results (tests/test_tracking_kernels.py: seeded pass identical, po
 1e-9 px).
 
 Speed (benchmarks/bench_tracking.py, 3072 frames of 256x256 px, 3 markers, one core, CPU
-time): the default method with the kernels runs at ~1.1x the speed of a plain ``cv2.moments``
-tracker without sub-pixel fit or lost-marker tests (~50,000 frames/s, ~11x the camera's 4500
-frames/s) at 0.0109 / 0.0123 / 0.0102 px RMS on the rendered staircase recording; with the edge
-step at ~0.8x (~37,000 frames/s) at 0.0077 / 0.0100 / 0.0083 px; the NumPy fallback at ~10,000
-frames/s (~5,000 with the edge step). Measured accuracy is in docs/measurement-imaging.md.
+time): the command line's tracker (the edge step on the centre and CD markers) with the
+kernels runs at ~0.9x the speed of a plain ``cv2.moments`` tracker without sub-pixel fit or
+lost-marker tests (~39,000 frames/s, ~9x the camera's 4500 frames/s) at 0.0077 / 0.0100 /
+0.0102 px RMS on the rendered staircase recording; the step on all three markers ~0.8-0.9x
+(~37,000 frames/s) at 0.0077 / 0.0100 / 0.0083 px; without it ~1.1-1.2x (~49,000 frames/s) at
+0.0109 / 0.0123 / 0.0102 px; the NumPy fallback at ~7,500 frames/s (~13,000 without the step).
+Measured accuracy is in docs/measurement-imaging.md.
 
 A marker is flagged ``lost`` in a frame (and its coordinates set to NaN) when: the window leaves
 the image; the contrast is too low (below ``min_contrast`` grey levels or ``min_snr`` times the
@@ -87,6 +91,9 @@ class Tracks:
         method: the centre-finding method used.
         window: the window size [px].
         dark: True if the markers are darker than their background.
+        options: the tracker's options (of the first markers where they differed).
+        edge_step_markers: per marker, whether its fit ended with the edge step (None: as
+            ``options.edge_step`` for every marker).
     """
 
     x: np.ndarray
@@ -98,6 +105,14 @@ class Tracks:
     window: int
     dark: bool = False
     options: TrackingOptions = field(default_factory=TrackingOptions)
+    edge_step_markers: tuple[bool, ...] | None = None
+
+    def stepped(self) -> tuple[bool, ...]:
+        """Per marker, whether the edge step ended its fit (``isocontour`` only)."""
+        if self.edge_step_markers is not None:
+            return tuple(self.edge_step_markers)
+        on = bool(self.options.edge_step) and self.method == "isocontour"
+        return (on,) * int(self.x.shape[1])
 
     @property
     def n_frames(self) -> int:
