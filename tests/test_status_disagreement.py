@@ -30,11 +30,16 @@ def test_disjoint_intervals_are_flagged_and_overlapping_ones_are_not():
     assert _disagreement(*_sets((0.0, 0.0016), (0.035, 0.041), "lost markers")) is None
 
 
-def test_the_miss_of_seed_3057_is_flagged(tmp_path, capsys):
-    """Seed 3064 no longer disagrees (every slip episode is followed now,
-    tests/test_slip_episodes.py); seed 3057 (unseen, a lower bound 7 % above mu, fitted onset
-    3 ms late in beta's lighting leftover) still does, and the status says so."""
-    summary, mu = render_and_measure(3057, tmp_path)
-    assert not summary["mu_low"] <= mu <= summary["mu_high"]  # the miss this test is about
+def test_a_rendered_disagreement_is_flagged(tmp_path, capsys):
+    """End to end: seed 181 of the harsh family, where the report's running max erred
+    ([0.0359, 0.0401] for a true mu of 0.0482) and the model's interval holds mu: the two are
+    disjoint and the status says so instead of "ok". (The rendered miss this test used, seed
+    3057, holds mu since the lighting orders became random effects, tests/test_lighting_leftover.py;
+    with the final default no flagged recording of the family or of seeds 2000-5099 misses mu.)"""
+    summary, mu = render_and_measure(181, tmp_path)
+    rm = summary["running_max"]
+    assert summary["mu_low"] <= mu <= summary["mu_high"]
+    assert not rm["mu_low"] <= mu <= rm["mu_high"]           # the running max erred here
+    assert rm["mu_high"] < summary["mu_low"] or summary["mu_high"] < rm["mu_low"]
     assert summary["status"].startswith("check: ") and "do not overlap" in summary["status"]
     capsys.readouterr()
