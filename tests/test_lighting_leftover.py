@@ -41,6 +41,19 @@ def test_the_orders_amplitudes_are_measured_on_the_record():
     assert np.linalg.eigvalsh(cov).min() > -1e-15
 
 
+def test_unfitted_samples_are_left_out():
+    # NaN where the record was not fitted (residual) or not tracked (phase): the amplitudes come
+    # from the other samples, and the window's covariance stays finite
+    rng = np.random.default_rng(4)
+    phi, res = _record(rng, {5: 5e-4}, 1e-3)
+    res[:200] = np.nan
+    phi[3000:] = np.nan
+    lh = harmonic_leftover(phi, res, slice(300, 1000), (5, 6))
+    assert lh is not None and lh.orders == (5,)
+    assert abs(lh.amplitudes_rad()["5"] - 5e-4) < 0.1 * 5e-4
+    assert np.isfinite(lh.cov()).all()
+
+
 def test_white_noise_alone_gives_no_random_effect_mostly():
     # an order enters only above DETECT_SIGMAS of a noise sinusoid's amplitude over the window
     hits = 0

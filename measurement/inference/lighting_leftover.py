@@ -69,10 +69,11 @@ def harmonic_leftover(phase_record: np.ndarray, record_residual: np.ndarray,
     residual [rad] over the whole record, NaN where not fitted) over ``window`` (a slice of
     the record); None without orders or usable samples."""
     res = np.asarray(record_residual, float)
-    ok = np.isfinite(res)
+    phase_record = np.asarray(phase_record, float)
+    ok = np.isfinite(res) & np.isfinite(phase_record)
     if not orders or ok.sum() < 4 * len(orders) + 10:
         return None
-    h_rec = columns(phase_record, tuple(orders))
+    h_rec = columns(np.where(ok, phase_record, 0.0), tuple(orders))
     r = res[ok] - float(np.mean(res[ok]))
     coef = np.linalg.lstsq(h_rec[ok], r, rcond=None)[0]
     amp2 = coef[0::2] ** 2 + coef[1::2] ** 2          # squared amplitude of each order
