@@ -22,6 +22,8 @@ model factor and whitening), writing the CSV/JSON, importing matplotlib and draw
 figures (Agg drawing and PNG encoding apart).
 
     python benchmarks/bench_measure.py [--seed 1] [--repeat 5]     (on an idle machine)
+    python benchmarks/bench_measure.py --repeat 3 --busy 2   (+ the price of BLAS threads on a
+                                                              busy machine)
 """
 from __future__ import annotations
 
@@ -161,10 +163,34 @@ def _line(label: str, runs: list[tuple[float, float]], duration: float) -> str:
             f"CPU runs {', '.join(f'{r[1]:.2f}' for r in runs)})")
 
 
+def _busy_machine(cmd: list[str], env: dict, duration: float, args) -> None:
+    """``cmd`` (not pinned to a core) beside ``args.busy`` spinning processes, alternating one
+    BLAS thread (what ``abu`` sets) with one per core (OpenBLAS's default): a shared lab
+    machine or a sweep's other workers."""
+    if cmd[0] == "taskset":
+        cmd = cmd[3:]
+    spin = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            for _ in range(args.busy)]
+    try:
+        runs: dict[str, list[tuple[float, float]]] = {"1": [], str(os.cpu_count() or 2): []}
+        for _ in range(args.repeat):
+            for n in runs:
+                runs[n].append(timed(cmd, {**env, "OPENBLAS_NUM_THREADS": n}))
+    finally:
+        for p in spin:
+            p.kill()
+    print(f"  --no-plots beside {args.busy} busy processes (not pinned):")
+    for n, r in runs.items():
+        print(_line(f"OPENBLAS_NUM_THREADS={n}:", r, duration))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--busy", type=int, default=0,
+                    help="also time --no-plots with N busy processes beside it, one BLAS "
+                         "thread (abu's default) against as many as cores (OpenBLAS's own)")
     args = ap.parse_args()
     from twin.scenario import random_scenario, render_scenario
 
@@ -198,6 +224,8 @@ def main() -> None:
             print(_line("--no-plots, no .pyc:", nocache, duration))
             print("  (PYTHONDONTWRITEBYTECODE is set here: every module of the project "
                   "compiled at each start, unlike an installed package)")
+        if args.busy > 0:
+            _busy_machine(base + ["--no-plots"], env, duration, args)
         start = timed([sys.executable, "-c", "import abu.cli.main"], env)
         print(f"  'import abu.cli.main' alone (fresh process): wall {start[0]:.3f} s, "
               f"CPU {start[1]:.3f} s")
