@@ -27,6 +27,11 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 PNG_DPI = 150
 #: No creation dates in vector files (reproducible bytes).
 _METADATA = {"pdf": {"CreationDate": None}, "svg": {"Date": None}, "png": {}}
+#: Settings every figure file is drawn with. Unhinted glyphs: the outlines themselves, as in
+#: the PDF; FreeType's default auto-hinter snaps them to the pixel grid, which helps a screen
+#: at 8 pt and 96 dpi, not print at :data:`PNG_DPI`: it cut the underscore of "omega_dot" off
+#: the measurement's legend at 150 dpi, and cost 40 ms of the measurement's 0.3 s of figures.
+DRAW_RC = {"text.hinting": "no_hinting"}
 
 
 def check_figure_format(figure_format: str, option: str = "figure_format") -> str:
@@ -58,7 +63,7 @@ def save_figure(fig, path: str | os.PathLike, figure_format: str = "png") -> Pat
         return target
     buffer = io.BytesIO()
     # fixed SVG ids (else random clip-path names)
-    with matplotlib.rc_context({"svg.hashsalt": "abu-friction"}):
+    with matplotlib.rc_context({**DRAW_RC, "svg.hashsalt": "abu-friction"}):
         fig.savefig(buffer, format=fmt, dpi=PNG_DPI, metadata=_METADATA[fmt],
                     **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}))
     atomic_write_bytes(target, buffer.getvalue())
@@ -79,15 +84,24 @@ def _png_bytes(fig) -> bytes:
     dpi0 = fig.dpi
     fig.set_dpi(PNG_DPI)
     try:
-        fig.canvas.draw()
+        with matplotlib.rc_context(DRAW_RC):
+            fig.canvas.draw()
         rgba = np.asarray(fig.canvas.buffer_rgba())
     finally:
         fig.set_dpi(dpi0)
     opaque = bool((rgba[..., 3] == 255).all())
-    pixels = rgba[..., :3] if opaque else rgba
-    height, width, channels = pixels.shape
-    rows = np.zeros((height, 1 + width * channels), np.uint8)   # filter byte 0: none
-    rows[:, 1:] = pixels.reshape(height, -1)
+    height, width = rgba.shape[:2]
+    channels = 3 if opaque else 4
+    rows = np.empty((height, 1 + width * channels), np.uint8)
+    rows[:, 0] = 0                                                # filter byte 0: none
+    if opaque:
+        # RGB out of RGBA as 3-byte items (one copy per pixel: 3.4x faster than the byte-wise
+        # strided copy of rgba[..., :3], 2 ms against 7 ms for a 1200x1260 figure)
+        src = np.ndarray((height, width), dtype="V3", buffer=rgba,
+                         strides=(rgba.strides[0], rgba.strides[1]))
+        rows[:, 1:].view("V3")[:] = src
+    else:
+        rows[:, 1:] = rgba.reshape(height, -1)
     ppm = round(PNG_DPI / 0.0254)                                 # pixels per metre
 
     def chunk(kind: bytes, data: bytes) -> bytes:
@@ -126,6 +140,13 @@ def _texts(fig) -> list:
 def layout_problems(fig) -> list[str]:
     """What a reader of the drawn ``fig`` would object to in its layout: a text cut by the
     canvas edge, two texts overlapping, a legend on a panel's data area. Empty when none."""
+    import matplotlib
+
+    with matplotlib.rc_context(DRAW_RC):   # the text extents of the file written
+        return _layout_problems(fig)
+
+
+def _layout_problems(fig) -> list[str]:
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     canvas = fig.bbox

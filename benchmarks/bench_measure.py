@@ -229,6 +229,7 @@ def main() -> None:
         start = timed([sys.executable, "-c", "import abu.cli.main"], env)
         print(f"  'import abu.cli.main' alone (fresh process): wall {start[0]:.3f} s, "
               f"CPU {start[1]:.3f} s")
+        _teardown(env, args.repeat)
 
         # where the time goes: one in-process run, stage by stage (CPU time, no profiler)
         cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + [
@@ -250,6 +251,21 @@ def main() -> None:
               f"two bare 3-panel figures = {floor:.3f} s = {floor / duration:.2f} x recording "
               f"(issue 20's target with figures: 1.5 x)")
         print("    " + proc.stderr.strip())
+
+
+def _teardown(env: dict, repeat: int) -> None:
+    """CPU time of the interpreter's module teardown that ``abu``'s exit skips
+    (:mod:`abu.cli.process_exit`): a process that loads NumPy and matplotlib and draws a
+    figure, ended by ``sys.exit`` and by ``exit_process``, alternated."""
+    load = ("import numpy; from matplotlib.figure import Figure; "
+            "from matplotlib.backends.backend_agg import FigureCanvasAgg; f = Figure(); "
+            "FigureCanvasAgg(f); f.subplots(3, 1); f.canvas.draw()")
+    fast = load + "; from abu.cli.process_exit import exit_process; exit_process(0)"
+    pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
+    diffs = [timed(pin + [sys.executable, "-c", load], env)[1]
+             - timed(pin + [sys.executable, "-c", fast], env)[1] for _ in range(repeat)]
+    print(f"  interpreter teardown that abu's exit skips (numpy + matplotlib loaded): "
+          f"{statistics.median(diffs):.3f} s CPU (median of {repeat} alternated pairs)")
 
 
 if __name__ == "__main__":

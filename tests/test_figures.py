@@ -140,6 +140,28 @@ def test_axes_are_scaled_to_the_trusted_data(pngs):
     assert any(f"mu_d = {high['mu_d']:.3g}" in s and "highest mu" in s for s in labels), labels
 
 
+def test_each_interval_is_one_legend_entry_with_its_numbers(pngs):
+    """Panel (c) of the kinematics figure: each interval (the model fit's, the running max's)
+    is one legend entry that shows both bound lines and states [low, high] as summary.json."""
+    out, _, drawn = pngs
+    summary = json.loads((out / "measure" / "summary.json").read_text())
+    legend = drawn["kinematics"][0][0].axes[2].get_legend()
+    labels = [t.get_text() for t in legend.get_texts()]
+    rm = summary["running_max"]
+    expected = [f"model fit, {100 * summary['confidence']:g} %: "
+                f"[{summary['mu_low']:.4g}, {summary['mu_high']:.4g}]",
+                f"running max: [{rm['mu_low']:.4g}, {rm['mu_high']:.4g}]"]
+    assert all(e in labels for e in expected), labels
+    from matplotlib.colors import to_hex
+
+    from matplotlib.lines import Line2D
+
+    drawn_lines = {(line.get_linestyle(), to_hex(line.get_color()))
+                   for line in legend.findobj(Line2D)}
+    for style in ("--", ":"):   # each interval's low (green) and high (red) line
+        assert {(style, to_hex("C2")), (style, to_hex("C3"))} <= drawn_lines, drawn_lines
+
+
 def test_pdf_and_svg_on_request(tmp_path, tracks_csv, fmu_dir):
     from abu.cli.main import main
 
@@ -169,9 +191,12 @@ def test_pdf_and_svg_on_request(tmp_path, tracks_csv, fmu_dir):
 @pytest.mark.parametrize("facecolor", ["white", (1.0, 1.0, 1.0, 0.0)])
 def test_png_holds_the_pixels_savefig_draws(tmp_path, facecolor):
     """The PNG writer of :func:`abu_model.figure_files.save_figure` (unfiltered rows, zlib
-    level 1) stores the very pixels matplotlib's own PNG (Pillow) does, at PNG_DPI, RGB for an
-    opaque figure and RGBA for a transparent one; Pillow reads it back with its dpi."""
+    level 1) stores the very pixels matplotlib's own PNG (Pillow) does, at PNG_DPI with the
+    settings of DRAW_RC, RGB for an opaque figure and RGBA for a transparent one; Pillow reads it
+    back with its dpi."""
     import io
+
+    import matplotlib
 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -184,7 +209,8 @@ def test_png_holds_the_pixels_savefig_draws(tmp_path, facecolor):
     ax.legend()
     ax.set_xlabel("time [s]")
     reference = io.BytesIO()
-    fig.savefig(reference, format="png", dpi=ff.PNG_DPI)
+    with matplotlib.rc_context(ff.DRAW_RC):
+        fig.savefig(reference, format="png", dpi=ff.PNG_DPI)
     path = ff.save_figure(fig, tmp_path / "f", "png")
     assert path.name == "f.png" and fig.dpi == 100     # the figure's own dpi is restored
     with Image.open(path) as mine, Image.open(reference) as ref:

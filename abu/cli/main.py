@@ -98,5 +98,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                        precheck=check_not_applicable)
 
 
+def console_main() -> None:
+    """The ``abu`` program (``[project.scripts]``): :func:`main` on ``sys.argv``, then the
+    process ends without freeing its modules one by one (:mod:`abu.cli.process_exit`)."""
+    from abu.cli.process_exit import exit_process
+
+    exit_process(main())
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    console_main()
