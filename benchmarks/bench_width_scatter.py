@@ -17,7 +17,9 @@ predictor's own error.
      10^6 k + seed; the scenario itself is drawn from the case's seed as before);
    * ``phase``: where the run happens relative to the lamps and lens: the ABU's start angle
      theta(0) uniform in [0, 2 pi) (the whole motion turned, same noise);
-   * ``both``: both at once (what two recordings of the same planned run differ by).
+   * ``both``: both at once (what two recordings of the same planned run differ by);
+   * ``mu_d``: both, and mu_d / mu redrawn uniformly in [0.6, 1] as the population draws it
+     (what a plan faces: it knows the design, mu, the camera and the lighting, never mu_d).
    Each is measured with ``abu measure`` and the benchmark's options.
 3. Printed: per case and pooled, the sd and 5-95 % range of ln(width / case geometric mean);
    the share of recordings within [0.77, 1.3] of their case's geometric mean and of its median
@@ -27,15 +29,17 @@ predictor's own error.
    drawn covariate explains (mu_d / mu, the stick stretch in ABU turns before the planned slip,
    the drive's torque lag, reflections, exposure, the speed at the slip).
 
-Run (one core: about 18 min CPU for the defaults)::
+Run (one core: 16 min CPU for the defaults, 360 recordings rendered and measured)::
 
     OPENBLAS_NUM_THREADS=1 nice python benchmarks/bench_width_scatter.py
     python benchmarks/bench_width_scatter.py --cases 1026 1005 --repeats 4 --modes both
-    python benchmarks/bench_width_scatter.py --population-rows designed.jsonl  # saved rows
+    python benchmarks/bench_width_scatter.py --population-rows designed.jsonl \
+        --cases $(seq 1048 1059) --modes both mu_d   # one whole cycle of the 12 designs: cases
+                                                     # not chosen by their outcome
 
 Seeds: the population and cases are seeds of ``bench_designed_runs.py``'s validation slice
 (1000-1071); the repeats' noise seeds and start angles are drawn from
-``default_rng([case seed, 11 or 13, k])`` and 10^6 k + seed: same arguments, same figures.
+``default_rng([case seed, 11, 13 or 14, k])`` and 10^6 k + seed: same arguments, same figures.
 """
 from __future__ import annotations
 
@@ -68,7 +72,7 @@ LOG_BAND = (math.log(designed.RATIO_BAND[0]), math.log(designed.RATIO_BAND[1]))
 #: two per drive (config of seed s: (s - 1000) mod 12), ranges covered; in the final
 #: default's population 1026, 1005, 1064, 1032, 1022 fell outside [0.77, 1.3]
 DEFAULT_CASES = (1026, 1037, 1005, 1064, 1032, 1018, 1022, 1021)
-MODES = ("noise", "phase", "both")
+MODES = ("noise", "phase", "both", "mu_d")
 #: the design's fields a row keeps (as ``bench_designed_runs``'s rows)
 DESIGN_KEYS = ("omega0_hz", "omega_end_hz", "t0_s", "te_s", "rounding", "step_hz", "fps_hz",
                "frames", "record_s")
@@ -80,23 +84,25 @@ def config_of(seed: int, first: int) -> tuple[tuple[float, float], str]:
     return cfg[(seed - first) % len(cfg)]
 
 
-def variant(mode: str, seed: int, k: int) -> tuple[int, float]:
-    """(noise seed, start angle [rad]) of repeat k of a case (k = 0: the original run)."""
+def variant(mode: str, seed: int, k: int) -> tuple[int, float, float | None]:
+    """(noise seed, start angle [rad], mu_d / mu or None: the case's) of repeat k of a case
+    (k = 0: the original run)."""
     if k == 0:
-        return seed, 0.0
-    noise_seed = seed + 10 ** 6 * k if mode in ("noise", "both") else seed
-    angle_rad = 0.0
-    if mode in ("phase", "both"):
-        angle_rad = float(np.random.default_rng([seed, 11 if mode == "phase" else 13, k])
-                          .uniform(0.0, TWO_PI))
-    return noise_seed, angle_rad
+        return seed, 0.0, None
+    rng = np.random.default_rng([seed, {"noise": 10, "phase": 11, "both": 13, "mu_d": 14}[mode],
+                                 k])
+    noise_seed = seed + 10 ** 6 * k if mode != "phase" else seed
+    angle_rad = float(rng.uniform(0.0, TWO_PI)) if mode != "noise" else 0.0
+    rho = float(rng.uniform(*designed.MU_D_RATIO)) if mode == "mu_d" else None
+    return noise_seed, angle_rad, rho
 
 
 def render_measure(job: tuple) -> dict:
     """Render one designed run (noise seed and start angle as given) and measure it with the
     designed-runs benchmark's options; its row."""
-    seed, mu_range, drive_name, design, noise_seed, angle_rad = job
+    seed, mu_range, drive_name, design, noise_seed, angle_rad, rho = job
     mu, mu_d = designed.draw(seed, mu_range)
+    mu_d = mu_d if rho is None else rho * mu
     frames_n = int(round(design["record_s"] * design["fps_hz"])) + 1
     scn = random_scenario(seed, n_frames=max(frames_n, 1000))
     scn = replace(scn, ball=replace(scn.ball, mu=mu, mu_d=mu_d), seed=noise_seed,
@@ -210,6 +216,9 @@ def report_scatter(rows: dict[str, dict[int, list[dict]]], pop: dict[int, dict])
         s_mean, lo_m, hi_m = bootstrap_share(groups, "mean")
         s_med, lo_d, hi_d = bootstrap_share(groups, "median")
         normal = math.erf(LOG_BAND[1] / (sd * math.sqrt(2.0)))
+        # the symmetric band [1/f, f] around the case centre that holds 90 % of the recordings
+        f90 = math.exp(float(np.percentile(np.abs(np.concatenate(
+            [(g - g.mean()) * math.sqrt(g.size / (g.size - 1)) for g in groups])), 90)))
         print(f"  {mode:5s} pooled over {len(groups)} cases ({x_all.size} recordings, "
               f"{infinite} null bounds left out): sd of ln(width) {sd:.3f}, 5-95 % of width / "
               f"case geometric mean [{math.exp(np.percentile(x_all, 5)):.2f}, "
@@ -218,7 +227,8 @@ def report_scatter(rows: dict[str, dict[int, list[dict]]], pop: dict[int, dict])
               f"geometric mean) {100 * s_mean:.1f} % (bootstrap over cases 5-95 % "
               f"[{100 * lo_m:.1f}, {100 * hi_m:.1f}]), of the median {100 * s_med:.1f} % "
               f"[{100 * lo_d:.1f}, {100 * hi_d:.1f}]; normal with the pooled sd "
-              f"{100 * normal:.1f} %")
+              f"{100 * normal:.1f} %; the band holding 90 % at this scatter "
+              f"[{1 / f90:.2f}, {f90:.2f}]")
     return pooled
 
 
@@ -229,7 +239,8 @@ def explained(y: np.ndarray, x: np.ndarray) -> float:
     return float(np.corrcoef(y, x)[0, 1] ** 2)
 
 
-def report_population(pop: dict[int, dict], sd_within: float) -> None:
+def report_population(pop: dict[int, dict], sd_within: float, sd_plan: float | None
+                      ) -> None:
     """Print measured / predicted over the population and its split into within-case scatter
     and between-case error, with what each covariate explains of the latter."""
     rs = [r for r in pop.values() if math.isfinite(width_of(r))]
@@ -244,6 +255,12 @@ def report_population(pop: dict[int, dict], sd_within: float) -> None:
           f"{sd_within:.3f}) {v_w:.4f} ({100 * v_w / v_tot:.0f} %) + between-case (the "
           f"predictor's error) {v_b:.4f} ({100 * v_b / v_tot:.0f} %); with the mean bias too: "
           f"mean square {v_tot + y.mean() ** 2:.4f}")
+    if sd_plan is not None:
+        v_mu_d = max(sd_plan ** 2 - v_w, 0.0)
+        print(f"  of the between-case part: mu_d / mu unknown to any plan (sd at fixed plan "
+              f"{sd_plan:.3f}) {v_mu_d:.4f} ({100 * v_mu_d / v_tot:.0f} % of all), the rest, "
+              f"what a predictor could still learn, {max(v_b - v_mu_d, 0.0):.4f} "
+              f"({100 * max(v_b - v_mu_d, 0.0) / v_tot:.0f} %)")
     print(f"  the width model at the true mu_d / mu (its lanes 0.6 / 0.8 / 1, interpolated in "
           f"ln): sd {y_or.std(ddof=1):.3f}, mean {y_or.mean():+.3f}, within [0.77, 1.3] "
           f"{100 * in_band(y_or).mean():.1f} %")
@@ -273,7 +290,7 @@ def population_rows(a: argparse.Namespace, designs: dict, pool: Pool | None) -> 
     jobs = []
     for s in range(a.first, a.first + a.population):
         rng_, dname = config_of(s, a.first)
-        jobs.append((s, rng_, dname, designs[(rng_, dname)], s, 0.0))
+        jobs.append((s, rng_, dname, designs[(rng_, dname)], s, 0.0, None))
     rows = pool.map(render_measure, jobs, chunksize=1) if pool else map(render_measure, jobs)
     return {r["seed"]: r for r in rows}
 
@@ -330,12 +347,14 @@ def main() -> None:
           f"({', '.join(a.modes)}); {len(jobs) + (0 if a.population_rows else a.population)} "
           f"rendered and measured in {cpu_s / 60:.1f} min CPU")
     pooled = report_scatter(rows, pop)
-    mode = "both" if "both" in pooled else a.modes[-1]
     if "noise" in pooled and "phase" in pooled:
         print(f"  noise and start angle add up (independent): sqrt(sd_noise^2 + sd_phase^2) = "
               f"{math.hypot(pooled['noise'], pooled['phase']):.3f}"
               + (f" against both at once {pooled['both']:.3f}" if "both" in pooled else ""))
-    report_population(pop, pooled[mode])
+    # the scatter at fixed everything: both at once, else noise and start angle in quadrature
+    within = pooled.get("both") or math.hypot(pooled.get("noise", 0.0), pooled.get("phase", 0.0))
+    if within > 0:
+        report_population(pop, within, pooled.get("mu_d"))
 
 
 if __name__ == "__main__":
