@@ -208,7 +208,8 @@ def report_scatter(rows: dict[str, dict[int, list[dict]]], pop: dict[int, dict])
                   f"{100 * math.exp(lw.mean()):.1f} % (run 0 {100 * w[0]:.1f} %), sd "
                   f"{lw.std(ddof=1):.3f}, 5-95 % [{math.exp(np.percentile(x, 5)):.2f}, "
                   f"{math.exp(np.percentile(x, 95)):.2f}]; ratio run 0 {w[0] / ex:.2f}, case "
-                  f"mean {math.exp(lw.mean()) / ex:.2f}, in band {100 * in_band(lw - math.log(ex)).mean():.0f} %")
+                  f"mean {math.exp(lw.mean()) / ex:.2f}, in band "
+                  f"{100 * in_band(lw - math.log(ex)).mean():.0f} %")
         x_all = np.concatenate([g - g.mean() for g in groups])
         sd = math.sqrt(sum(float(np.sum((g - g.mean()) ** 2)) for g in groups)
                        / sum(g.size - 1 for g in groups))
