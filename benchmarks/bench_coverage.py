@@ -30,6 +30,8 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
     nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
     python benchmarks/bench_coverage.py --reanalyse D   # the kept tracks, current analysis
+    python benchmarks/bench_coverage.py --reanalyse D --lighting-models two   # both lighting
+                                                        # models' union (lighting_models)
 """
 from __future__ import annotations
 
@@ -61,6 +63,8 @@ from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E40
 #: Options added to every ``abu measure`` of the rendered recordings (``--edge-step``,
 #: ``--no-edge-step``).
 EXTRA_MEASURE_ARGS: list[str] = []
+#: Analysis options added to every ``abu measure``, also of kept tracks (``--lighting-models``).
+ANALYSIS_ARGS: list[str] = []
 #: theta's harmonic prior without a camera file (the family prior).
 THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
 
@@ -113,7 +117,7 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
     refl = int(scn.lighting.reflections)
     args = ["measure", str(rec), "--out", str(out), "--overwrite", "--quiet", "--no-plots",
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
-    args += EXTRA_MEASURE_ARGS
+    args += EXTRA_MEASURE_ARGS + ANALYSIS_ARGS
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
         np.savez(keep / f"state{seed}.npz", times=scn.times, l=scn.ball.l, d=scn.ball.d,
@@ -210,7 +214,8 @@ def reanalyse(folder: Path, work: Path) -> list[dict]:
         with redirect_stdout(io.StringIO()), redirect_stderr(err):
             status = abu_main(["measure", str(tracks), "--tracks", "--out", str(out),
                                "--overwrite", "--quiet", "--no-plots", "--l",
-                               repr(float(st["l"])), "--d", repr(float(st["d"]))])
+                               repr(float(st["l"])), "--d", repr(float(st["d"])),
+                               *ANALYSIS_ARGS])
         keep.update({"measure_s": time.perf_counter() - t1, "exit": status})
         rows.append(measured_row(keep, status, err, out, st["times"], st))
         r = rows[-1]
@@ -400,11 +405,15 @@ def main() -> None:
     ap.add_argument("--reanalyse", default=None,
                     help="a --keep folder: measure its kept tracks again with the current "
                          "analysis (no rendering) and print the figures")
+    ap.add_argument("--lighting-models", choices=["one", "two"], default=None,
+                    help="abu measure --lighting-models (default: its default, one)")
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
     if args.edge_step or args.no_edge_step:
         EXTRA_MEASURE_ARGS.append("--edge-step" if args.edge_step else "--no-edge-step")
+    if args.lighting_models:
+        ANALYSIS_ARGS.extend(["--lighting-models", args.lighting_models])
     if args.summarize:
         rows = [json.loads(line) for line in open(args.summarize)]
         print(f"{len(rows)} recordings from {args.summarize}")
@@ -420,7 +429,8 @@ def main() -> None:
             Path(args.out).mkdir(parents=True, exist_ok=True)
             with open(Path(args.out) / "results.jsonl", "w") as fh:
                 fh.writelines(json.dumps(r) + "\n" for r in rows)
-        print(f"{len(rows)} recordings re-analysed from the tracks in {args.reanalyse}")
+        print(f"{len(rows)} recordings re-analysed from the tracks in {args.reanalyse}; "
+              f"abu measure options added: {' '.join(ANALYSIS_ARGS) or 'none (defaults)'}")
         report(rows, "all recordings")
         return
     out = Path(args.out or tempfile.mkdtemp(prefix="bench_coverage_"))
@@ -461,7 +471,8 @@ def main() -> None:
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"
              if args.camera else "no camera calibration (family prior on theta's harmonic)")
-          + f"; abu measure options added: {' '.join(EXTRA_MEASURE_ARGS) or 'none (defaults)'}")
+          + "; abu measure options added: "
+          + f"{' '.join(EXTRA_MEASURE_ARGS + ANALYSIS_ARGS) or 'none (defaults)'}")
     report(rows, "all recordings")
     report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
     report([r for r in rows if r["reflections"] == 2], "two reflections (--ball-reflections 2)")

@@ -191,6 +191,8 @@ def main() -> None:
     ap.add_argument("--busy", type=int, default=0,
                     help="also time --no-plots with N busy processes beside it, one BLAS "
                          "thread (abu's default) against as many as cores (OpenBLAS's own)")
+    ap.add_argument("--two-lighting-models", action="store_true",
+                    help="also time --no-plots --lighting-models two in the same alternation")
     args = ap.parse_args()
     from twin.scenario import random_scenario, render_scenario
 
@@ -205,10 +207,12 @@ def main() -> None:
                             "--quiet"] + refl
         env = child_env(tmp / "pycache")
         timed(base, env)                          # warm the page cache and the .pyc files
-        whole, noplot = [], []
+        whole, noplot, two = [], [], []
         for _ in range(args.repeat):              # alternate the two, several pairs
             whole.append(timed(base, env))
             noplot.append(timed(base + ["--no-plots"], env))
+            if args.two_lighting_models:
+                two.append(timed(base + ["--no-plots", "--lighting-models", "two"], env))
         plain = child_env(None)
         nocache = [timed(base + ["--no-plots"], plain) for _ in range(3)] \
             if plain.get("PYTHONDONTWRITEBYTECODE") else []
@@ -220,6 +224,8 @@ def main() -> None:
         print(_line("--no-plots (peer):", noplot, duration))
         print(f"  figures cost {statistics.median(r[1] for r in whole) - statistics.median(r[1] for r in noplot):.3f} s CPU "
               f"(median difference)")
+        if two:
+            print(_line("--no-plots --lighting-models two:", two, duration))
         if nocache:
             print(_line("--no-plots, no .pyc:", nocache, duration))
             print("  (PYTHONDONTWRITEBYTECODE is set here: every module of the project "

@@ -330,6 +330,10 @@ def _option_cases(c: Corpus, good_tracks: Path) -> None:
                       "{out}"], "--poly-degree")
     c.add("options", ["measure", "--tracks", str(good_tracks), "--no-harmonic",
                       "--harmonic-phase", "abu", "--out", "{out}"], "--harmonic-phase")
+    c.add("options", ["measure", "--tracks", str(good_tracks), "--no-harmonic",
+                      "--lighting-models", "two", "--out", "{out}"], "--lighting-models")
+    c.add("options", ["measure", "--tracks", str(good_tracks), "--lighting-models", "three",
+                      "--out", "{out}"], "--lighting-models")
     c.add("options", ["measure", "--tracks", str(good_tracks), "--seed", "3", "--out", "{out}"],
           "--seed")
     c.add("options", ["track", str(good_tracks), "--ball-method", "pair", "--out", "{out}"],

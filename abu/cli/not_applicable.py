@@ -77,7 +77,7 @@ RULES: tuple[Rule, ...] = (
      "with --ball-reflections 1 (the ball method chooses between two reflections)"),
     ("measure", lambda a: a.estimator == "savgol", ("--poly-degree",),
      "with --estimator savgol (the polynomial degree is the report estimator's)"),
-    ("measure", lambda a: a.no_harmonic, ("--harmonic-phase",),
+    ("measure", lambda a: a.no_harmonic, ("--harmonic-phase", "--lighting-models"),
      "with --no-harmonic (no lighting harmonic is fitted)"),
     ("measure", lambda a: a.mc_draws == 0, ("--seed",),
      "with --mc-draws 0 (the seed draws the Monte Carlo noise; give --mc-draws N)"),

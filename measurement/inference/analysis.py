@@ -27,7 +27,7 @@ from measurement.inference import infer_mu as inference_mod
 from measurement.inference import running_max as interval_mod
 from measurement.inference import onset as onset_mod
 from measurement.inference.slip_model import signed_mu_req
-from measurement.inference import uncertainty, window_sets
+from measurement.inference import lighting_models, uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
 from measurement.kinematics import estimators as kin_mod
@@ -100,27 +100,62 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
     inf = None
     if infer and opt.inference is not None:
         lost_any = None if lost is None else np.asarray(lost, bool)[:, 1:].any(axis=1)
-        windows = inference_windows(time.size, kin_mod.sample_interval(time), opt)
-        each = replace(opt.inference, confidence=window_sets.level_each(
-            opt.inference.confidence, len(windows)), theta_harmonic_rad=_lens_prior(kin, opt))
-        sets: list[inference_mod.Inference] = []
-        for k, window in enumerate(windows):
-            kin_w = kin if k == 0 else _kinematics(time, theta, opt.with_(sg_window_s=window))
-            # beta with the lighting harmonics removed by the whole-record fit (monotone b(t)
-            # + harmonics over all revolutions): over the short inference window a free
-            # harmonic would trade off against the slip curve.
-            sets.append(inference_mod.infer_mu(
-                time, theta, harm.beta_clean, kin_w.omega, kin_w.omega_dot, kin_w.sigma_omega,
-                kin_w.sigma_omega_dot, kin_w.bias_omega_dot, kin_w.trusted, l=l, d=d,
-                direction=direction, lost=lost_any, deviation=iv.deviation,
-                record_residual=harm.residual, omega_dot_rho=kin_w.omega_dot_rho,
-                # beta's noise model is the record's, whatever the kinematics: estimated once
-                noise=(sets[0].details.get("noise_model") or None) if sets else None,
-                options=each))
-        inf = window_sets.intersect_sets(sets, windows, opt.inference.confidence)
+        inf = _model_set(time, theta, harm, kin, iv, lost_any, l, d, direction, opt)
+        inf = _second_lighting_model(time, theta, beta, harm, kin, iv, lost_any, l, d,
+                                     direction, opt, inf)
     bracket = None if inf is None else _onset(time, kin, l, d, direction, inf, opt)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf,
             "onset": bracket}
+
+
+def _model_set(time: np.ndarray, theta: np.ndarray, harm: harmonic_mod.HarmonicFit,
+               kin: kin_mod.Kinematics, iv, lost_any: np.ndarray | None, l: float, d: float,
+               direction: int, opt: AnalysisOptions) -> inference_mod.Inference:
+    """The model-based set on mu from beta cleaned by ``harm`` (one set per kinematics
+    window, intersected: :mod:`window_sets`)."""
+    windows = inference_windows(time.size, kin_mod.sample_interval(time), opt)
+    each = replace(opt.inference, confidence=window_sets.level_each(
+        opt.inference.confidence, len(windows)), theta_harmonic_rad=_lens_prior(kin, opt))
+    sets: list[inference_mod.Inference] = []
+    for k, window in enumerate(windows):
+        kin_w = kin if k == 0 else _kinematics(time, theta, opt.with_(sg_window_s=window))
+        # beta with the lighting harmonics removed by the whole-record fit (monotone b(t)
+        # + harmonics over all revolutions); the window refits the low orders as nuisances
+        sets.append(inference_mod.infer_mu(
+            time, theta, harm.beta_clean, kin_w.omega, kin_w.omega_dot, kin_w.sigma_omega,
+            kin_w.sigma_omega_dot, kin_w.bias_omega_dot, kin_w.trusted, l=l, d=d,
+            direction=direction, lost=lost_any, deviation=iv.deviation,
+            record_residual=harm.residual, omega_dot_rho=kin_w.omega_dot_rho,
+            # beta's noise model is the record's, whatever the kinematics: estimated once
+            noise=(sets[0].details.get("noise_model") or None) if sets else None,
+            options=each))
+    return window_sets.intersect_sets(sets, windows, opt.inference.confidence)
+
+
+def _second_lighting_model(time: np.ndarray, theta: np.ndarray, beta: np.ndarray,
+                           harm: harmonic_mod.HarmonicFit, kin: kin_mod.Kinematics, iv,
+                           lost_any: np.ndarray | None, l: float, d: float, direction: int,
+                           opt: AnalysisOptions, inf: inference_mod.Inference
+                           ) -> inference_mod.Inference:
+    """``inf`` joined with the set under the alternative lighting orders where the two
+    models' cleaned betas disagree in the fit window (:mod:`lighting_models`)."""
+    alt_orders = tuple(opt.harmonic_orders_alternative)
+    if not opt.harmonic or not alt_orders or alt_orders == tuple(opt.harmonic_orders):
+        return inf
+    phase = theta + beta if opt.harmonic_phase == "ball" else theta
+    alt = harmonic_mod.remove_harmonic(time, beta, phase, orders=alt_orders,
+                                       amp_degree=opt.harmonic_amp_degree,
+                                       knot_spacing_s=opt.knot_spacing_s, direction=direction)
+    winv = lighting_models.whitener(inf, int(lighting_models.window_of(inf).sum()),
+                                    kin_mod.sample_interval(time), float(harm.residual_sigma))
+    chi2 = lighting_models.bound_shift_chi2(inf, harm.beta_clean, alt.beta_clean, theta,
+                                            tuple(opt.inference.harmonic_orders),
+                                            opt.inference.theta_harmonics, winv)
+    if chi2 <= lighting_models.DISAGREEMENT_CHI2:
+        return replace(inf, details={**inf.details, "lighting_disagreement_chi2": chi2})
+    other = _model_set(time, theta, alt, kin, iv, lost_any, l, d, direction, opt)
+    union = lighting_models.union_sets(inf, other, (tuple(opt.harmonic_orders), alt_orders))
+    return replace(union, details={**union.details, "lighting_disagreement_chi2": chi2})
 
 
 def _onset(time: np.ndarray, kin: kin_mod.Kinematics, l: float, d: float, direction: int,

@@ -37,6 +37,10 @@ class AnalysisOptions:
             (beyond its half window), 0.05 s for ``report`` (the report's own choice).
         harmonic: remove the lighting harmonic from beta.
         harmonic_orders: harmonic orders fitted (1 = rotation frequency).
+        harmonic_orders_alternative: a second lighting model of the record (``abu measure
+            --lighting-models two``: orders 1-6); where it changes beta in the fit window
+            beyond the window's nuisances, the reported set is the union of both models' sets
+            (:mod:`lighting_models`); () (default) off: it costs a second inference.
         harmonic_amp_degree: polynomial degree in time of the harmonic's amplitude.
         harmonic_phase: ``ball`` (ball angle in the image, theta + beta) or ``cd`` (theta).
         knot_spacing_s: knot spacing of the monotone beta basis [s].
@@ -66,6 +70,7 @@ class AnalysisOptions:
     trim_s: float | None = None
     harmonic: bool = True
     harmonic_orders: tuple[int, ...] = (1, 2, 3, 4)
+    harmonic_orders_alternative: tuple[int, ...] = ()
     harmonic_amp_degree: int = 0
     harmonic_phase: str = "ball"
     knot_spacing_s: float = 0.005

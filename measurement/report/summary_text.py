@@ -18,6 +18,11 @@ def describe_measurement(s: dict) -> str:
                      f"({mf['status']}), slip onset {fmt_value(mf['t_slip'], '.4f')} s; mu_d = "
                      f"{fmt_value(s.get('mu_d'))} in [{fmt_value(s.get('mu_d_low'))}, "
                      f"{fmt_value(s.get('mu_d_high'))}]")
+        if mf.get("lighting_models"):
+            lines.append("  union of two lighting models: " + "; ".join(
+                f"orders {m['harmonic_orders'][0]}-{m['harmonic_orders'][-1]} "
+                f"[{fmt_value(m['mu_low'])}, {fmt_value(m['mu_high'])}]"
+                for m in mf["lighting_models"]))
         lines.append(f"  report's running max: [{fmt_value(rm['mu_low'])}, "
                      f"{fmt_value(rm['mu_high'])}] ({rm['status']}"
                      + ("" if "no coverage" in rm["status"] else "; no coverage guarantee")
