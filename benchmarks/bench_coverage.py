@@ -166,6 +166,9 @@ def measured_row(row: dict, status: int, err: io.StringIO, out: Path, times: np.
                                        "profile_mu_low", "profile_mu_high", "ar1_rho",
                                        "t_slip")})
     row["t_slip_true"] = float(state["switches"][0]) if len(state["switches"]) else None
+    if "lighting_disagreement_chi2" in mf:       # --lighting-models two
+        row["lighting_chi2"] = mf["lighting_disagreement_chi2"]
+        row["lighting_union"] = "lighting_models" in mf
     cam_info = s.get("camera") or {}
     row["theta_prior_rad"] = (cam_info.get("theta_harmonic_prior") or {}).get(
         "theta_harmonic_rad", THETA_PRIOR_DEFAULT)
@@ -271,6 +274,10 @@ def report(rows: list[dict], label: str) -> None:
           f"({len(rows) - len(ok)} refused or failed)")
     if not ok:
         return
+    judged = [r for r in ok if "lighting_union" in r]
+    if judged:
+        print(f"  second lighting model's set computed (and joined) in "
+              f"{100 * np.mean([r['lighting_union'] for r in judged]):.1f} % of {len(judged)}")
     for r in ok:
         # hull of the two (AnalysisOptions.combine="hull", the default reported interval)
         for k, f, a, b in (("hull_low", min, "model_low", "rm_low"),
