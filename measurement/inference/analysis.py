@@ -83,16 +83,8 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
     trusted = kin.trusted
     med = float(np.median(kin.omega_dot[trusted])) if trusted.any() else 0.0
     direction = -1 if med > 0 else 1
-    if opt.harmonic:
-        phase = theta + beta if opt.harmonic_phase == "ball" else theta
-        harm = harmonic_mod.remove_harmonic(
-            time, beta, phase, orders=tuple(opt.harmonic_orders),
-            amp_degree=opt.harmonic_amp_degree, knot_spacing_s=opt.knot_spacing_s,
-            direction=direction)
-    else:
-        harm = harmonic_mod.remove_harmonic(time, beta, theta, orders=(),
-                                            knot_spacing_s=opt.knot_spacing_s,
-                                            direction=direction)
+    harm = _lighting_fit(time, theta, beta, tuple(opt.harmonic_orders) if opt.harmonic else (),
+                         direction, opt)
     iv = interval_mod.slip_interval(time, kin.omega, kin.omega_dot, kin.sigma_omega,
                                     kin.sigma_omega_dot, trusted, harm.beta_clean, harm.residual,
                                     l=l, d=d, options=opt.interval, direction=direction,
@@ -106,6 +98,17 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
     bracket = None if inf is None else _onset(time, kin, l, d, direction, inf, opt)
     return {"theta": theta, "beta": beta, "kin": kin, "harm": harm, "iv": iv, "inf": inf,
             "onset": bracket}
+
+
+def _lighting_fit(time: np.ndarray, theta: np.ndarray, beta: np.ndarray,
+                  orders: tuple[int, ...], direction: int,
+                  opt: AnalysisOptions) -> harmonic_mod.HarmonicFit:
+    """The whole-record fit of beta: monotone b(t) + the lighting harmonics of ``orders`` (none:
+    b(t) alone) in the ball's angle or theta (``harmonic_phase``)."""
+    phase = theta + beta if opt.harmonic_phase == "ball" and orders else theta
+    return harmonic_mod.remove_harmonic(time, beta, phase, orders=orders,
+                                        amp_degree=opt.harmonic_amp_degree,
+                                        knot_spacing_s=opt.knot_spacing_s, direction=direction)
 
 
 def _model_set(time: np.ndarray, theta: np.ndarray, harm: harmonic_mod.HarmonicFit,
@@ -142,10 +145,7 @@ def _second_lighting_model(time: np.ndarray, theta: np.ndarray, beta: np.ndarray
     alt_orders = tuple(opt.harmonic_orders_alternative)
     if not opt.harmonic or not alt_orders or alt_orders == tuple(opt.harmonic_orders):
         return inf
-    phase = theta + beta if opt.harmonic_phase == "ball" else theta
-    alt = harmonic_mod.remove_harmonic(time, beta, phase, orders=alt_orders,
-                                       amp_degree=opt.harmonic_amp_degree,
-                                       knot_spacing_s=opt.knot_spacing_s, direction=direction)
+    alt = _lighting_fit(time, theta, beta, alt_orders, direction, opt)
     winv = lighting_models.whitener(inf, int(lighting_models.window_of(inf).sum()),
                                     kin_mod.sample_interval(time), float(harm.residual_sigma))
     chi2 = lighting_models.bound_shift_chi2(inf, harm.beta_clean, alt.beta_clean, theta,
