@@ -120,3 +120,15 @@ def test_seed_2046_holds_mu_with_two_lighting_models(tmp_path, capsys):
     assert two["mu_high"] == one["mu_high"]                # the union only widened down
     assert len(two["model_fit"]["lighting_models"]) == 2
     capsys.readouterr()
+
+
+def test_bad_alternative_orders_are_refused_by_name():
+    import pytest
+
+    from abu_model.errors import ParameterError
+    from measurement.inference.analysis import AnalysisOptions
+
+    for bad in ((0, 1), (1, 2.5), (-3,)):
+        with pytest.raises(ParameterError, match="harmonic_orders_alternative"):
+            AnalysisOptions(harmonic_orders_alternative=bad)
+    assert AnalysisOptions(harmonic_orders_alternative=()).harmonic_orders_alternative == ()

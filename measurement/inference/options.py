@@ -106,6 +106,9 @@ class AnalysisOptions:
                                  "a tuple of windows > 0 s")
         for w in self.sg_extra_windows_s:
             check_positive("sg_extra_windows_s", w, "s")
+        if not all(isinstance(k, int) and k >= 1 for k in self.harmonic_orders_alternative):
+            raise ParameterError("harmonic_orders_alternative", self.harmonic_orders_alternative,
+                                 "harmonic orders >= 1 (() for one lighting model)")
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
         if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
             raise ParameterError("trim_s", self.trim_s, ">= 0 s")
