@@ -3,6 +3,7 @@ construction (SI units; names ending ``_s`` are seconds)."""
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -106,7 +107,8 @@ class AnalysisOptions:
                                  "a tuple of windows > 0 s")
         for w in self.sg_extra_windows_s:
             check_positive("sg_extra_windows_s", w, "s")
-        if not all(isinstance(k, int) and k >= 1 for k in self.harmonic_orders_alternative):
+        if not all(isinstance(k, numbers.Integral) and k >= 1
+                   for k in self.harmonic_orders_alternative):
             raise ParameterError("harmonic_orders_alternative", self.harmonic_orders_alternative,
                                  "harmonic orders >= 1 (() for one lighting model)")
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
