@@ -386,7 +386,9 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     # the stages below share these caches: each pair is integrated, each mu profiled once
     models = SlipModelCache(win.t, win.q, win.omega, region.run_max, int(direction), d / l,
                             opt.max_episodes)
-    profile = MuDProfile(models, opt.mu_d_refine)
+    # a mu the refinements of mu_d cannot bring within crit is not refined; only while the
+    # statistic is the plain RSS ratio (a long-run factor divides it after the profile)
+    profile = MuDProfile(models, opt.mu_d_refine, crit if opt.lrv_window_s <= 0 else None)
     lighting = None
     orders = tuple(k for k in opt.leftover_orders if k not in opt.harmonic_orders)
     if orders and opt.noise_model == "leftover" and record_residual is not None:

@@ -74,11 +74,16 @@ class MuDProfile:
     Args:
         models: the fit window's :class:`SlipModelCache`.
         refinements: shrinking 5-point refinements of mu_d / mu per mu (step / 2.5 each).
+        prune_stat: skip the refinements of a mu whose likelihood-ratio statistic stays above
+            this many chi^2 units whatever they find (:func:`refinement_needed`); None: refine
+            every mu.
     """
 
-    def __init__(self, models: SlipModelCache, refinements: int) -> None:
+    def __init__(self, models: SlipModelCache, refinements: int,
+                 prune_stat: float | None = None) -> None:
         self.models = models
         self.refinements = int(refinements)
+        self.prune_stat = prune_stat
         self._known: dict = {}
 
     def __call__(self, mu_grid: np.ndarray, gls: Gls, ratio_grid: np.ndarray
@@ -88,15 +93,17 @@ class MuDProfile:
         known = self._known.setdefault((gls, ratio_grid.size), {})
         new = np.array([m for m in mu_grid if float(m) not in known])
         if new.size:
-            val, cur = self._minimise_over_mu_d(new, gls, ratio_grid)
+            best_known = min((v[0] for v in known.values()), default=np.inf)
+            val, cur = self._minimise_over_mu_d(new, gls, ratio_grid, best_known)
             for k, mu_k in enumerate(new):
                 known[float(mu_k)] = (float(val[k]), float(cur[k]))
         vals = [known[float(m)] for m in mu_grid]
         return np.array([v[0] for v in vals]), np.array([v[1] for v in vals])
 
-    def _minimise_over_mu_d(self, new: np.ndarray, gls: Gls, ratio_grid: np.ndarray
-                            ) -> tuple[np.ndarray, np.ndarray]:
-        """(smallest RSS, its mu_d / mu) per mu of ``new``: grid, then shrinking grids."""
+    def _minimise_over_mu_d(self, new: np.ndarray, gls: Gls, ratio_grid: np.ndarray,
+                            best_known: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """(smallest RSS, its mu_d / mu) per mu of ``new``: grid, then shrinking grids (for
+        the mu that can still matter, see ``prune_stat``)."""
         mu_all = np.repeat(new, ratio_grid.size)
         mud_all = mu_all * np.tile(ratio_grid, new.size)
         m, _ = self.models.rows(mu_all, mud_all)
@@ -107,17 +114,53 @@ class MuDProfile:
         # the true mu (its best mu_d is off the grid) while some other mu happens to have a
         # grid point that fits: a narrow, wrong set (measured: with the true kinematics and
         # the true beta + white noise, a 0.05 ratio grid covered 58 % of 60 drives).
-        rows = np.arange(new.size)
-        cur, val = ratio_grid[j].astype(float), rss[rows, j]
+        cur, val = ratio_grid[j].astype(float), rss[np.arange(new.size), j]
         step = float(ratio_grid[1] - ratio_grid[0]) if ratio_grid.size > 1 else 0.1
+        live = np.arange(new.size)
+        if self.prune_stat is not None:
+            live = np.flatnonzero(refinement_needed(rss, min(best_known, float(val.min())),
+                                                    gls.dof, self.prune_stat))
+        rows = np.arange(live.size)
         for _ in range(self.refinements):
+            if live.size == 0:
+                break
             offs = np.linspace(-step, step, 5)
-            r_loc = np.clip(cur[:, None] + offs[None, :], MU_D_RATIO[0], MU_D_RATIO[1])
-            m, _ = self.models.rows(np.repeat(new, offs.size), (new[:, None] * r_loc).ravel())
-            rss2 = gls.rss(m).reshape(new.size, offs.size)
+            r_loc = np.clip(cur[live, None] + offs[None, :], MU_D_RATIO[0], MU_D_RATIO[1])
+            m, _ = self.models.rows(np.repeat(new[live], offs.size),
+                                    (new[live, None] * r_loc).ravel())
+            rss2 = gls.rss(m).reshape(live.size, offs.size)
             jj = np.argmin(rss2, axis=1)
-            better = rss2[rows, jj] < val
-            cur = np.where(better, r_loc[rows, jj], cur)
-            val = np.where(better, rss2[rows, jj], val)
+            better = rss2[rows, jj] < val[live]
+            cur[live] = np.where(better, r_loc[rows, jj], cur[live])
+            val[live] = np.where(better, rss2[rows, jj], val[live])
             step /= 2.5
         return val, cur
+
+
+def refinement_needed(rss: np.ndarray, rss_best: float, dof: float,
+                      prune_stat: float) -> np.ndarray:
+    """Which candidate mu (rows of ``rss``: the profile RSS on the coarse mu_d grid) can still
+    reach a likelihood-ratio statistic of ``prune_stat`` when mu_d is refined.
+
+    The refinements search mu_d between the coarse grid's neighbours of each row's minimum b.
+    Were the RSS convex in mu_d there, its minimum would be >= b - r, with r the largest rise
+    between neighbouring grid values next to b (two on each side); ``b - 2 r`` is taken as the
+    floor. The statistic (RSS - best) / (best / dof) only grows as the best RSS falls (and the
+    best known now bounds the final best from above), so a row whose floor is above
+    ``prune_stat`` stays rejected: skipping its refinements changes no accepted set while the
+    RSS keeps above that floor (tests/test_profile_pruning.py compares with refining every mu;
+    the kept tracks of the benchmark family and slices gave the same intervals). The rows
+    skipped are the candidates far from the data, e.g. those slipping from the window's start
+    (measured: the analysis of a 3072-frame rendered recording 0.26 -> 0.18 s CPU, of synthetic
+    tracks 8-25 % less)."""
+    rss = np.asarray(rss, float)
+    n_rows, n_grid = rss.shape
+    j = np.argmin(rss, axis=1)
+    b = rss[np.arange(n_rows), j]
+    if n_grid < 2 or not np.isfinite(rss_best) or rss_best <= 0.0:
+        return np.ones(n_rows, bool)
+    rise = np.abs(np.diff(rss, axis=1))                      # (rows, n_grid - 1)
+    k = np.arange(n_grid - 1)[None, :]
+    near = (k >= j[:, None] - 2) & (k <= j[:, None] + 1)     # the 2 steps on each side of b
+    floor = b - 2.0 * np.max(np.where(near, rise, 0.0), axis=1)
+    return (floor - rss_best) * max(float(dof), 1.0) / rss_best <= prune_stat
