@@ -1,7 +1,7 @@
 """The slip model's compiled kernel (``measurement.inference._slipc``) against its NumPy
 reference (``slip_model._slip_displacement_numpy``): the same displacement to 1e-9 of the
-largest, the same onsets to 1e-12 s, on a broad random family and on real analyses; bad
-buffers refused with ValueError / TypeError.
+largest and the same onsets to 1e-12 s on a broad random family; the same mu bounds from real
+analyses (to :data:`BOUNDS_REL_TOL`); bad buffers refused with ValueError / TypeError.
 
 The random family (seeded, each case printed on failure): N from 3 to 2000 samples at 1-40
 kHz; omega of either sign, 10-130 rad/s, drifting by up to +-300 rad/s^2; q a slow or fast

@@ -1,10 +1,14 @@
 """The ball's slip along the rim for candidate (mu, mu_d), driven by a measured ABU motion.
 
-Two implementations of one model: a compiled kernel (``_slipc``, C, built by ``pip install
--e .``), one candidate row at a time, and the NumPy reference used when the kernel is not built,
+Two implementations of one model and discretisation: a compiled kernel (``_slipc.c``, built
+by ``pip install -e .``), one candidate row at a time (~12x faster in an analysis:
+benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
 vectorised over candidates and time (integrating factor + cumulative sums; episodes of slip
-are looped, samples are not). They agree to rounding (tests/test_slip_kernel.py). Used by :mod:`measurement.inference.infer_mu` (the model-based confidence
-set) and :func:`measurement.inference.running_max.predicted_creep` (the report's creep lower bound).
+are looped, samples are not). They agree to rounding (the kernel takes the integrating factor
+from each episode's onset, the reference from the call's first column; <= 1e-13 of max |D|,
+tests/test_slip_kernel.py). Used by :mod:`measurement.inference.infer_mu` (the model-based
+confidence set) and :func:`measurement.inference.running_max.predicted_creep` (the report's
+creep lower bound).
 """
 from __future__ import annotations
 
@@ -62,7 +66,8 @@ def _slip_displacement_numpy(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu
                              mu_d: np.ndarray, direction: int, d_over_l: float, *,
                              max_episodes: int | None = None
                              ) -> tuple[np.ndarray, np.ndarray]:
-    """The NumPy reference of :func:`slip_displacement` (same arguments and results)."""
+    """The NumPy reference of :func:`slip_displacement` (same arguments; the same results to
+    rounding)."""
     mu = np.asarray(mu, float)[:, None]
     mud = np.asarray(mu_d, float)[:, None]
     m_rows, n = mu.shape[0], t.size
