@@ -1,11 +1,15 @@
-"""Build of the one compiled module: the tracker's C kernels (everything else is in
-pyproject.toml).
+"""Build of the compiled modules: the tracker's C kernels and the slip model (everything else
+is in pyproject.toml).
 
-``measurement.imaging._trackc`` is a plain CPython extension (the buffer protocol, no NumPy
-headers). It is optional: without a C compiler the install still succeeds and the tracker
-runs its NumPy/OpenCV path (same results, ~4x slower; tests/test_tracking_kernels.py).
+``measurement.imaging._trackc`` and ``measurement.inference._slipc`` are plain CPython
+extensions (the buffer protocol, no NumPy headers). They are optional: without a C compiler
+the install still succeeds and the tracker runs its NumPy/OpenCV path (same results, ~4x
+slower; tests/test_tracking_kernels.py), the slip model its NumPy path (same results to
+rounding, slower; tests/test_slip_kernel.py).
 """
 from setuptools import Extension, setup
 
 setup(ext_modules=[Extension("measurement.imaging._trackc",
-                             sources=["measurement/imaging/_trackc.c"], optional=True)])
+                             sources=["measurement/imaging/_trackc.c"], optional=True),
+                   Extension("measurement.inference._slipc",
+                             sources=["measurement/inference/_slipc.c"], optional=True)])

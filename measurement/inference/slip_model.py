@@ -1,12 +1,23 @@
 """The ball's slip along the rim for candidate (mu, mu_d), driven by a measured ABU motion.
 
-Vectorised over candidates and time (integrating factor + cumulative sums; episodes of slip
-are looped, samples are not). Used by :mod:`measurement.inference.infer_mu` (the model-based confidence
-set) and :func:`measurement.inference.running_max.predicted_creep` (the report's creep lower bound).
+Two implementations of one model and discretisation: a compiled kernel (``_slipc.c``, built
+by ``pip install -e .``), one candidate row at a time (~12x faster in an analysis:
+benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
+vectorised over candidates and time (integrating factor + cumulative sums; episodes of slip
+are looped, samples are not). They agree to rounding (the kernel takes the integrating factor
+from each episode's onset, the reference from the call's first column; <= 1e-13 of max |D|,
+tests/test_slip_kernel.py). Used by :mod:`measurement.inference.infer_mu` (the model-based
+confidence set) and :func:`measurement.inference.running_max.predicted_creep` (the report's
+creep lower bound).
 """
 from __future__ import annotations
 
 import numpy as np
+
+try:  # the compiled kernel, built by `pip install -e .` where a C compiler is found
+    from measurement.inference import _slipc
+except ImportError:  # pragma: no cover - the NumPy reference gives the same results
+    _slipc = None
 
 
 def signed_mu_req(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float,
@@ -36,6 +47,27 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
     Returns:
         (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
     """
+    if _slipc is not None:
+        args = [np.ascontiguousarray(a, dtype=float) for a in (t, q, omega, mu, mu_d)]
+        t_, q_, w_, mu_, mud_ = args
+        if (all(a.ndim == 1 for a in args) and t_.size >= 2 and q_.size == w_.size == t_.size
+                and mud_.size == mu_.size):
+            disp, onset = np.empty((mu_.size, t_.size)), np.empty(mu_.size)
+            cap = -1 if max_episodes is None else max(int(max_episodes), 0)
+            _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap, disp,
+                        onset)
+            return disp, onset
+    # no kernel, or shapes the kernel does not take: the reference (broadcasts or raises)
+    return _slip_displacement_numpy(t, q, omega, mu, mu_d, direction, d_over_l,
+                                    max_episodes=max_episodes)
+
+
+def _slip_displacement_numpy(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.ndarray,
+                             mu_d: np.ndarray, direction: int, d_over_l: float, *,
+                             max_episodes: int | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """The NumPy reference of :func:`slip_displacement` (same arguments; the same results to
+    rounding)."""
     mu = np.asarray(mu, float)[:, None]
     mud = np.asarray(mu_d, float)[:, None]
     m_rows, n = mu.shape[0], t.size
