@@ -5,10 +5,11 @@ Every stage of the inference (noise model, mu grid refinement, mu_d set, onset, 
 curves) asks for model displacements of candidate pairs (mu, mu_d) and for the profile RSS of
 candidate mu; both are cached so that a pair is integrated once and a mu profiled once per fit.
 
-Bit-for-bit note: :meth:`SlipModelCache.rows` integrates all missing pairs of one call
-together, from the earliest onset among them, so the numbers depend (in the last bits) on the
-order and batching of the calls. The stages keep the call sequence of the original
-single-function implementation.
+Bit-for-bit note: with the NumPy fallback of the slip model (no compiled ``_slipc``),
+:meth:`SlipModelCache.rows` integrates all missing pairs of one call together from the earliest
+onset among them, and its running sums cancel from that column, so the numbers depend (to
+~1e-7 relative of an RSS) on the order and batching of the calls; the compiled kernel
+integrates each row from its own onset and does not depend on them.
 """
 from __future__ import annotations
 
