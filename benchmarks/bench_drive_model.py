@@ -2,10 +2,13 @@
 
 The staircase drives of the harsh family (``twin.scenario.random_scenario(seed)``, kind
 ``staircase_pi``: a digital PI loop at the frame rate with torque lag, setpoint weighting
-and, in 60 % of them, a setpoint filter the drive model does not contain), tracks as in
+and, in 60 % of them, a setpoint filter), tracks as in
 ``tests/test_inference.py::scenario_tracks`` (camera geometry, lens, white tracking noise,
 lighting shift of the ball). The drive model is given the true loop parameters as drive.json
-(no intervals: all fitted freely) and the true staircase. Printed:
+(no intervals: all fitted freely), with the drive's setpoint filter (``setpoint_tau_s``, where
+it has one) and its controller's sample time (``sample_time_s`` = the frame interval), and the
+true staircase; ``--continuous`` leaves the last two out (the model before they existed).
+Printed:
 
 * omega_dot error at the true slip (first stick -> slip frame): RMS for SG and the model,
   and the share of errors inside the stated 95 % bar (2 sigma + bias bound);
@@ -47,12 +50,19 @@ from test_inference import scenario_tracks  # noqa: E402
 from twin.scenario import random_scenario  # noqa: E402
 
 
+#: The twin's controller samples at the frame rate (``--continuous``: None, no filter).
+SAMPLE_TIME: list[float | None] = [1.0 / 4500.0]
+
+
 def drive_of(spec, tau_scale: float = 1.0, tau_ci_rel: float | None = None) -> Drive:
     tau = spec.tau_motor * tau_scale
     ci = {} if tau_ci_rel is None else {"tau_motor_s": (tau * (1 - tau_ci_rel),
                                                         tau * (1 + tau_ci_rel))}
+    digital = SAMPLE_TIME[0] is not None
     return Drive(model="pi-lag-weighted", zeta=spec.zeta, omega_n=spec.omega_n,
-                 tau_motor=max(tau, 1e-5), setpoint_weight=spec.setpoint_weight, ci95=ci)
+                 tau_motor=max(tau, 1e-5), setpoint_weight=spec.setpoint_weight, ci95=ci,
+                 setpoint_tau=spec.setpoint_tau if digital else 0.0,
+                 sample_time=SAMPLE_TIME[0])
 
 
 def setpoints_of(spec):
@@ -125,15 +135,20 @@ def main() -> None:
                     help="relative discrepancy floor on the model's omega_dot [-]")
     ap.add_argument("--ripple", type=float, default=0.1,
                     help="torque ripple amplitude / |omega_dot| at the slip [-]")
+    ap.add_argument("--continuous", action="store_true",
+                    help="drive.json without setpoint_tau_s and sample_time_s")
     a = ap.parse_args()
+    if a.continuous:
+        SAMPLE_TIME[0] = None
     rows = [r for r in (one(s, a.error_rel, a.ripple) for s in range(a.first, a.first + a.n))
             if r is not None]
     n = len(rows)
     col = lambda k: np.array([r[k] for r in rows], float)  # noqa: E731
     rel = np.abs(col("model_err") / col("alpha"))
+    declared = ", continuous" if a.continuous else ", its setpoint filter and sample time"
     print(f"staircase drives of the harsh family, tracks level, seeds {a.first}.."
           f"{a.first + a.n - 1}: {n} recordings ({int(col('filter').sum())} with a setpoint "
-          f"filter); drive.json = the true loop (fitted freely), discrepancy floor "
+          f"filter); drive.json = the true loop (fitted freely){declared}, discrepancy floor "
           f"{a.error_rel:g}")
     print(f"  omega_dot error at the slip: RMS SG {np.sqrt(np.mean(col('sg_err') ** 2)):.2f}, "
           f"model {np.sqrt(np.mean(col('model_err') ** 2)):.2f} rad/s^2; median |err| SG "
