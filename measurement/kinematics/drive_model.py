@@ -5,30 +5,31 @@ driven by a known setpoint staircase), the ABU's motion over the whole record is
 
     theta(t) = theta0 + c t + Theta(t - t_off; zeta, omega_n, tau, b[, tau_f])
 
-with Theta the loop's exact response to the staircase (:mod:`abu_model.loop_response`),
-t_off the record's time offset to the staircase (the camera's trigger) and c a constant speed
-offset [rad/s]. A drive.json with ``setpoint_tau_s`` adds its first-order setpoint filter
-(time constant tau_f, fitted like the loop's parameters); one with ``sample_time_s`` (a
-digital controller) moves each step onto the controller's first sample at or after it
+with Theta the loop's exact response to the staircase (:mod:`abu_model.loop_response`), t_off
+the record's time offset to the staircase (the camera's trigger) and c a constant speed offset
+[rad/s]. A drive.json with ``setpoint_tau_s`` adds its first-order setpoint filter (time
+constant tau_f, fitted like the loop's parameters); one with ``sample_time_s`` (a digital
+controller) moves each step onto the controller's first sample at or after it
 (:func:`abu_model.loop_response.sampled`). On the harsh twin's digital PI drives (frame-rate
-controller, setpoint filters in 60 %) these two were what kept the residual from being white:
-``benchmarks/bench_drive_model.py``. The unknowns are fitted by nonlinear least squares on the tracked theta,
-weighted by the tracking noise sigma_theta; a loop parameter with a 95 % interval in the drive
-file gets a Gaussian prior of that width, one without is free (within the physical range of
-:data:`controller.drive.UPPER`). omega(t) and omega_dot(t) come from the fitted model, their
-standard errors from the parameter covariance (the Jacobian, scaled up by the reduced
-chi-square when it exceeds 1) propagated through the model.
+controller, setpoint filters in 60 %) these two were what kept the residual from being white
+(``benchmarks/bench_drive_model.py``). The unknowns are fitted by nonlinear least squares on
+the tracked theta, weighted by the tracking noise sigma_theta; a loop parameter with a 95 %
+interval in the drive file gets a Gaussian prior of that width, one without is free (within the
+physical range of :data:`controller.drive.UPPER`). omega(t) and omega_dot(t) come from the
+fitted model, their standard errors from the parameter covariance (the Jacobian, scaled up by
+the reduced chi-square when it exceeds 1) propagated through the model.
 
-**Honest when wrong.** A drive the model does not contain (a setpoint filter, torque ripple,
-a wrong lag held by a tight prior) leaves a systematic residual. The fit is *refused* when the
-residual is not white: for block lengths of 2, 8 and 32 ms the means of non-overlapping blocks
-of the normalised residual must be consistent with white noise of the residual's own spread
-(chi-square over the blocks), and so must the residual averaged over the staircase's steps,
-aligned on them (2 ms bins over the first 16 ms after each step: a model error at the steps,
-such as an undeclared setpoint filter, repeats at every step and adds up there while it
-drowns in the plain blocks); each test at ``level / 4``. The residual's spread must not exceed
-the tracking noise by more than ``max_rms_ratio``. A refused fit returns the reason; the caller
-then keeps the Savitzky-Golay kinematics (:mod:`measurement.kinematics.estimators`).
+**Honest when wrong.** A drive the model does not contain (an undeclared setpoint filter,
+torque ripple, a wrong lag held by a tight prior) leaves a systematic residual. The fit is
+*refused* when the residual is not white: for block lengths of 2, 8 and 32 ms the means of
+non-overlapping blocks of the normalised residual must be consistent with white noise of the
+residual's own spread (chi-square over the blocks), and so must the residual averaged over the
+staircase's steps, aligned on them (2 ms bins over the first 16 ms after each step: a model
+error at the steps, such as an undeclared setpoint filter, repeats at every step and adds up
+there while it drowns in the plain blocks); each test at ``level`` / their number. The
+residual's spread must not exceed the tracking noise by more than ``max_rms_ratio``. A refused
+fit returns the reason; the caller then keeps the Savitzky-Golay kinematics
+(:mod:`measurement.kinematics.estimators`).
 """
 from __future__ import annotations
 
