@@ -17,7 +17,12 @@ the tracked theta, weighted by the tracking noise sigma_theta; a loop parameter 
 interval in the drive file gets a Gaussian prior of that width, one without is free (within the
 physical range of :data:`controller.drive.UPPER`). omega(t) and omega_dot(t) come from the
 fitted model, their standard errors from the parameter covariance (the Jacobian, scaled up by
-the reduced chi-square when it exceeds 1) propagated through the model.
+the reduced chi-square when it exceeds 1) propagated through the model, with two floors:
+``error_rel`` of |omega_dot|, and half omega_dot's change over +- one controller sample
+(everywhere for a digital controller, within a frame of the steps for a continuous one): a
+sampled controller acts like a part-sample delay that right after a step need not be the
+record's time offset, and a torque lag of a fraction of a frame and a delay look alike in theta
+while omega_dot jumps.
 
 **Honest when wrong.** A drive the model does not contain (an undeclared setpoint filter,
 torque ripple, a wrong lag held by a tight prior) leaves a systematic residual. The fit is
@@ -53,6 +58,8 @@ BLOCKS_S = (0.002, 0.008, 0.032)
 #: Step-locked whiteness test: bins of this length [s] over at most this long after each
 #: step [s] (cut to the shortest gap between steps, so that no sample counts twice).
 STEP_BIN_S, STEP_WINDOW_S = 0.002, 0.016
+#: The timing bar on omega_dot (:meth:`_Model.step_sigma`) looks this many samples either side.
+TIMING_SAMPLES = 1.0
 
 
 @dataclass(frozen=True)
@@ -136,6 +143,7 @@ class _Model:
     def __init__(self, time: np.ndarray, drive: Drive, setpoints: Setpoints,
                  settings: DriveModelSettings):
         self.t, self.sp = time, sampled(setpoints, drive.sample_time)
+        self.sample_time = drive.sample_time
         self.names = ["t_off_s"]
         self.x0 = [0.0]
         self.lo = [-settings.t_off_max_s]
@@ -171,6 +179,31 @@ class _Model:
         window = n_bin * max(0, int(min(gap, STEP_WINDOW_S) / dt) // n_bin)
         first = np.searchsorted(self.t, steps, side="left")
         return first[(steps >= self.t[0]) & (first + window <= self.t.size)], window
+
+    def step_sigma(self, p: np.ndarray) -> np.ndarray:
+        """A timing bar on omega_dot [rad/s^2]: half its change over +- one sample time of a
+        digital controller (everywhere), or +- one frame within one frame of a step (a
+        continuous one). Sampled, the controller acts like a delay of part of a sample that
+        differs from the whole record's time offset right after a step, where omega_dot
+        changes fastest (and jumps with a torque lag of a fraction of a frame: a lag that
+        short and a delay look alike in theta)."""
+        dt = float(self.t[1] - self.t[0])
+        delta = TIMING_SAMPLES * (self.sample_time or dt)
+        near = np.ones(self.t.size, bool)
+        steps = np.asarray(self.sp.step_times, float) + p[0]
+        if not self.sample_time:
+            k = np.searchsorted(steps, self.t)
+            left = steps[np.clip(k - 1, 0, steps.size - 1)]
+            right = steps[np.minimum(k, steps.size - 1)]
+            near = np.minimum(np.abs(self.t - left), np.abs(self.t - right)) < dt
+        out = np.zeros_like(self.t)
+        if near.any() and steps.size:
+            zeta, wn, tau, b, tau_f = self.loop(p)
+            tt = self.t[near] - p[0]
+            up, down = (response(self.sp, tt + s_, zeta, wn, tau, b, False,
+                                 setpoint_tau=tau_f).alpha for s_ in (delta, -delta))
+            out[near] = 0.5 * np.abs(up - down)
+        return out
 
     def loop(self, p: np.ndarray) -> tuple[float, float, float, float, float]:
         v = dict(zip(self.names[1:], p[1:]))
@@ -289,6 +322,8 @@ def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     se_w = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g_w_full, cov_w, g_w_full), 0.0))
     se_a = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g_a, c_nl, g_a), 0.0))
     se_a = np.hypot(se_a, st.error_rel * np.abs(alpha))
+    if hasattr(model, "step_sigma"):
+        se_a = np.hypot(se_a, model.step_sigma(p))
     params = {n: float(v) for n, v in zip(model.names, p)}
     params.update(theta0_rad=float(lin[0]), omega_offset_rad_s=float(lin[1]))
     std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(model.names)}
