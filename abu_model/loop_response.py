@@ -2,7 +2,11 @@
 
 The loop of :mod:`controller.drive` (PI on the rotor, torque lag tau, setpoint weight b) is
 
-    G(s) = w / w_ref = (2 zeta wn b s + wn^2) / (tau s^3 + s^2 + 2 zeta wn s + wn^2).
+    G(s) = w / w_ref = (2 zeta wn b s + wn^2) / (tau s^3 + s^2 + 2 zeta wn s + wn^2),
+
+times 1 / (tau_f s + 1) with a first-order setpoint filter (time constant tau_f; one more pole).
+A digital controller with sample time h sees each step at its first sample at or after the
+step's time (:func:`sampled`: the steps moved onto the controller's grid k h).
 
 Its unit-step response is S(u) = 1 + sum_i c_i exp(p_i u) with the poles p_i (roots of the
 denominator) and residues c_i = N(p_i) / (p_i D'(p_i)). A setpoint sequence (level L0 held
@@ -33,6 +37,8 @@ import numpy as np
 #: Relative separation below which two poles count as repeated; they are then split by this
 #: much (the residue formula needs simple poles; the response changes by ~1e-7 relative).
 _SPLIT = 1e-7
+#: A setpoint filter faster than this [s] is none (its pole would not be representable).
+_NO_FILTER_S = 1e-7
 
 
 @dataclass(frozen=True)
@@ -54,26 +60,41 @@ class Setpoints:
         return np.asarray(self.levels, float)[idx]
 
 
+def sampled(setpoints: Setpoints, period: float | None) -> Setpoints:
+    """The staircase as a digital controller with sample time ``period`` [s] applies it: each
+    step at the first sample k * period at or after its time (the controller's clock; None or
+    0: unchanged). Steps that fall on the same sample merge."""
+    if not period:
+        return setpoints
+    # a step within 1e-9 of a sample counts as on it (the times carry rounding errors)
+    times = np.ceil(np.asarray(setpoints.step_times, float) / period - 1e-9) * period
+    return Setpoints(tuple(float(v) for v in times), setpoints.levels)
+
+
 def as_setpoints(obj) -> Setpoints:
     """A :class:`Setpoints` from anything with ``step_times`` and ``levels`` (a Staircase)."""
     return Setpoints(tuple(float(t) for t in obj.step_times), tuple(float(v) for v in obj.levels))
 
 
-def loop_polynomials(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Numerator and denominator coefficients of w / w_ref (highest power first)."""
+def loop_polynomials(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0,
+                     setpoint_tau: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator coefficients of w / w_ref (highest power first);
+    ``setpoint_tau`` [s] > 0 puts a first-order setpoint filter 1 / (setpoint_tau s + 1) before
+    the loop (one more real pole)."""
     num = np.array([2.0 * zeta * omega_n * weight, omega_n**2])
     den = np.array([tau, 1.0, 2.0 * zeta * omega_n, omega_n**2]) if tau > 0 else \
         np.array([1.0, 2.0 * zeta * omega_n, omega_n**2])
+    if setpoint_tau > _NO_FILTER_S:
+        den = np.polymul(den, [setpoint_tau, 1.0])
     return num, den
 
 
 @lru_cache(maxsize=256)  # the design's search asks for the same drive thousands of times
-def modes(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0
-          ) -> tuple[np.ndarray, np.ndarray]:
+def modes(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0,
+          setpoint_tau: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Poles p_i [1/s] and step-response residues c_i [-] of the loop (complex arrays, not
     to be modified: cached)."""
-    num, den = loop_polynomials(zeta, omega_n, tau, weight)
+    num, den = loop_polynomials(zeta, omega_n, tau, weight, setpoint_tau)
     poles = np.asarray(np.roots(den), dtype=complex)
     scale = float(np.max(np.abs(poles)))
     for i in range(len(poles)):
@@ -99,13 +120,14 @@ class LoopResponse:
 
 def response(setpoints: Setpoints, t: Sequence[float] | np.ndarray, zeta: float,
              omega_n: float, tau: float = 0.0, weight: float = 1.0,
-             need_theta: bool = True) -> LoopResponse:
+             need_theta: bool = True, setpoint_tau: float = 0.0) -> LoopResponse:
     """The loop's response at the times ``t`` [s] (any order) to ``setpoints``.
 
-    Starts in the steady state at ``levels[0]`` (integrator and lag at rest).
+    Starts in the steady state at ``levels[0]`` (integrator, lag and setpoint filter at rest).
+    ``setpoint_tau``: time constant of a first-order setpoint filter [s] (0 = none).
     """
     t = np.asarray(t, dtype=float)
-    poles, res = modes(zeta, omega_n, tau, weight)
+    poles, res = modes(zeta, omega_n, tau, weight, setpoint_tau)
     tk = np.asarray(setpoints.step_times, dtype=float)
     levels = np.asarray(setpoints.levels, dtype=float)
     dw = np.diff(levels)

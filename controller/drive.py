@@ -23,6 +23,18 @@ on the proportional part:
 
 ``second-order`` has tau_motor = 0 and b = 1 (the report's model), ``pi-lag`` b = 1.
 
+Two optional fields of the PI models describe a drive more closely (absent: as above):
+
+* ``setpoint_tau_s`` [s] (> 0; ``setpoint_tau_s_ci95`` optional): a first-order setpoint
+  filter, w_f / w_ref = 1 / (setpoint_tau s + 1), before the loop (w_ref -> w_f above).
+* ``sample_time_s`` [s] (> 0): the controller is digital with this sample time and generates
+  the staircase on its own clock, so each step acts at the first sample k * sample_time at or
+  after the step's time. (Its integrator's discretisation is not modelled: a forward-Euler one
+  shifts the loop's zeta by about omega_n sample_time / 4, absorbed by the identified zeta.)
+
+Only ``abu measure --kinematics drive-model`` and the design's loop response use them;
+``abu simulate`` and ``abu render`` refuse a drive that has them (their controller has neither).
+
 ``tracking`` is the drive the report's chapter 6 recommends: a loop that follows a prescribed
 smooth speed trajectory omega_p(t) (``profile.json``, :mod:`controller.profile`) with a known
 bandwidth wb [rad/s] (``bandwidth_rad_s``, required; ``bandwidth_rad_s_ci95`` optional) and the
@@ -61,9 +73,11 @@ MODEL_PARAMETERS: dict[str, tuple[str, ...]] = {
     "tracking": ("bandwidth_rad_s", "tau_motor_s"),
 }
 UNITS = {"zeta": "1", "omega_n_rad_s": "rad/s", "tau_motor_s": "s", "setpoint_weight": "1",
-         "bandwidth_rad_s": "rad/s"}
+         "bandwidth_rad_s": "rad/s", "setpoint_tau_s": "s", "sample_time_s": "s"}
+#: Optional fields of the PI models (module doc); absent = no setpoint filter, continuous.
+PI_OPTIONAL = ("setpoint_tau_s", "sample_time_s")
 #: Fields of a PI drive that a tracking drive must not carry, and the reverse.
-PI_ONLY = ("zeta", "omega_n_rad_s", "setpoint_weight")
+PI_ONLY = ("zeta", "omega_n_rad_s", "setpoint_weight") + PI_OPTIONAL
 TRACKING_ONLY = ("bandwidth_rad_s",)
 
 
@@ -87,6 +101,8 @@ class Drive:
         tau_motor: torque lag [s] (>= 0; 0 for ``second-order``).
         setpoint_weight: b, weight of the setpoint in the proportional part [-] (> 0).
         bandwidth: ``tracking`` only: the loop's bandwidth wb [rad/s] (> 0; None otherwise).
+        setpoint_tau: PI models: time constant of a first-order setpoint filter [s] (0: none).
+        sample_time: PI models: the digital controller's sample time [s] (None: continuous).
         ci95: parameter name (file name, e.g. ``omega_n_rad_s``) -> (low, high) 95 % interval.
         fit: informative fit data (residual check, sizes); not validated.
         source: where the drive came from (a path or a description).
@@ -98,6 +114,8 @@ class Drive:
     tau_motor: float = 0.0
     setpoint_weight: float = 1.0
     bandwidth: float | None = None
+    setpoint_tau: float = 0.0
+    sample_time: float | None = None
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
     fit: dict[str, Any] = field(default_factory=dict)
     source: str = "default"
@@ -115,8 +133,15 @@ class Drive:
             raise DriveFileError(src, "must be 0 for the second-order model", "tau_motor_s")
         if self.model != "pi-lag-weighted" and self.setpoint_weight != 1.0:
             raise DriveFileError(src, f"must be 1 for the {self.model} model", "setpoint_weight")
+        _check_number(src, "setpoint_tau_s", self.setpoint_tau, 0.0, strict=False)
+        if self.sample_time is not None:
+            _check_number(src, "sample_time_s", self.sample_time, 0.0, strict=True)
         if self.model == "tracking":
             _check_number(src, "bandwidth_rad_s", self.bandwidth, 0.0, strict=True)
+            for name, absent in (("setpoint_tau_s", self.setpoint_tau == 0.0),
+                                 ("sample_time_s", self.sample_time is None)):
+                if not absent:
+                    raise DriveFileError(src, "not a parameter of the tracking model", name)
         elif self.bandwidth is not None:
             raise DriveFileError(src, f"not a parameter of the {self.model} model (only of "
                                  "'tracking')", "bandwidth_rad_s")
@@ -134,7 +159,8 @@ class Drive:
     def value(self, name: str) -> float:
         """Parameter by its file name (``zeta``, ``omega_n_rad_s``, ...)."""
         return {"zeta": self.zeta, "omega_n_rad_s": self.omega_n, "tau_motor_s": self.tau_motor,
-                "setpoint_weight": self.setpoint_weight, "bandwidth_rad_s": self.bandwidth}[name]
+                "setpoint_weight": self.setpoint_weight, "bandwidth_rad_s": self.bandwidth,
+                "setpoint_tau_s": self.setpoint_tau, "sample_time_s": self.sample_time}[name]
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of the file (see the module docstring)."""
@@ -145,6 +171,10 @@ class Drive:
             out.update(theta_ref_mode=self.theta_ref_mode, zeta=self.zeta,
                        omega_n_rad_s=self.omega_n, tau_motor_s=self.tau_motor,
                        setpoint_weight=self.setpoint_weight)
+            if self.setpoint_tau > 0:
+                out["setpoint_tau_s"] = self.setpoint_tau
+            if self.sample_time is not None:
+                out["sample_time_s"] = self.sample_time
         for name, (lo, hi) in self.ci95.items():
             out[f"{name}_ci95"] = [lo, hi]
         out["units"] = {k: v for k, v in UNITS.items() if k in out}
@@ -157,7 +187,7 @@ class Drive:
 #: Largest plausible value of each parameter (zeta [-], omega_n [rad/s], tau_motor [s], b [-]):
 #: a damping ratio, the natural frequency of a CD drive's speed loop, a motor's torque lag.
 UPPER = {"zeta": 1000.0, "omega_n_rad_s": 1.0e4, "tau_motor_s": 1.0, "setpoint_weight": 100.0,
-         "bandwidth_rad_s": 1.0e5}
+         "bandwidth_rad_s": 1.0e5, "setpoint_tau_s": 1.0, "sample_time_s": 1.0}
 
 
 def _check_number(source: str, name: str, value: Any, low: float, strict: bool) -> float:
@@ -203,18 +233,25 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
                ("setpoint_weight", 1.0))}
     for name, value in values.items():
         _check_number(source, name, value, 0.0, strict=name != "tau_motor_s")
+    tau_f = _check_number(source, "setpoint_tau_s", obj.get("setpoint_tau_s", 0.0), 0.0,
+                          strict=False)
+    sample = obj.get("sample_time_s")
+    if sample is not None:
+        sample = _check_number(source, "sample_time_s", sample, 0.0, strict=True)
     ci95 = _intervals(obj, model, source)
     fit = obj.get("fit") or {}
     return Drive(model=model, zeta=float(values["zeta"]),
                  omega_n=float(values["omega_n_rad_s"]), tau_motor=float(values["tau_motor_s"]),
-                 setpoint_weight=float(values["setpoint_weight"]), ci95=ci95,
-                 fit=fit if isinstance(fit, dict) else {}, source=source)
+                 setpoint_weight=float(values["setpoint_weight"]), setpoint_tau=tau_f,
+                 sample_time=sample, ci95=ci95, fit=fit if isinstance(fit, dict) else {},
+                 source=source)
 
 
 def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, float]]:
     """The ``<name>_ci95`` pairs of the model's parameters (checked when present)."""
     ci95: dict[str, tuple[float, float]] = {}
-    for name in MODEL_PARAMETERS[model]:
+    extra = ("setpoint_tau_s",) if model in PI_MODELS else ()
+    for name in MODEL_PARAMETERS[model] + extra:
         key = f"{name}_ci95"
         if key in obj and obj[key] is not None:
             pair = obj[key]

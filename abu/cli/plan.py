@@ -56,6 +56,13 @@ def apply_drive_to_args(args: argparse.Namespace) -> None:
         raise ParameterError("--drive", args.drive, "a drive without setpoint weighting "
                              f"(setpoint_weight 1, this one {drive.setpoint_weight:.4g}): the "
                              "simulated controller has none; identify with --model pi-lag")
+    for name, absent in (("setpoint_tau_s", drive.setpoint_tau == 0.0),
+                         ("sample_time_s", drive.sample_time is None)):
+        if not absent:
+            raise ParameterError("--drive", args.drive, f"a drive without {name} (the "
+                                 "simulated controller is continuous and has no setpoint "
+                                 "filter; only 'abu measure --kinematics drive-model' and "
+                                 "'abu design' use it)")
     if getattr(args, "theta_ref", "integral") != "integral":
         raise ParameterError("--theta-ref", args.theta_ref, "integral with --drive")
     args.zeta, args.omega_n, args.tau_motor = drive.zeta, drive.omega_n, drive.tau_motor

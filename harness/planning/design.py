@@ -390,7 +390,8 @@ def drive_corners(drive: Drive) -> list[Drive]:
         v.update(zip(names, corner))
         out.append(Drive(drive.model, v["zeta"], v["omega_n_rad_s"],
                          v["tau_motor_s"] if drive.model != "second-order" else 0.0,
-                         v["setpoint_weight"] if drive.model == "pi-lag-weighted" else 1.0))
+                         v["setpoint_weight"] if drive.model == "pi-lag-weighted" else 1.0,
+                         setpoint_tau=drive.setpoint_tau, sample_time=drive.sample_time))
     return out
 
 

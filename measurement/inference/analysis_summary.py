@@ -91,8 +91,9 @@ def _measured_errors(time: np.ndarray, dt: float, kin: kin_mod.Kinematics,
 
 
 def _rel_width(lo: float | None, hi: float | None) -> float | None:
-    """(hi - lo) / mid-point [1]; None without both bounds."""
-    return None if lo is None or hi is None else (hi - lo) / (0.5 * (hi + lo))
+    """(hi - lo) / mid-point [1]; None without both bounds or with a zero mid-point (a
+    running max of [0, 0]: the drive model's kinematics are exactly still before a step)."""
+    return None if lo is None or hi is None or hi + lo <= 0 else (hi - lo) / (0.5 * (hi + lo))
 
 
 def _running_max_summary(iv: SlipInterval, opt: AnalysisOptions, time: np.ndarray,
