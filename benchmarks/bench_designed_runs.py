@@ -39,7 +39,15 @@ no setpoint filter) over the design's staircase (``omega0_hz``, ``omega_end_hz``
 record's clock). Printed beside the default: refusals (and why), finite bounds, coverage, the
 median width, and measured / predicted width against the same (default-kinematics) predictor::
 
-    nice python benchmarks/bench_designed_runs.py --runs 24 --first 1000 --kinematics drive-model
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --kinematics drive-model
+
+What-ifs of that second measurement (not options of ``abu measure``): ``--free-setpoint-weight``
+declares a ``pi-lag`` drive as ``pi-lag-weighted`` (the setpoint weight fitted from 1: the
+twin's forward-Euler frame-rate integrator leaves a non-white residual when b is held at 1),
+``--timing-samples`` the drive model's timing bar (``TIMING_SAMPLES``; 0: none; the twin's
+frames are its controller's samples, a real camera's are not), ``--error-rel`` and
+``--max-evaluations`` the fit's settings; ``--exact`` measures a third time with the plant's
+exact kinematics (``bench_width_floor.exact_kinematics``: the floor no kinematics can beat).
 """
 from __future__ import annotations
 
@@ -78,6 +86,9 @@ RATIO_BAND = (0.77, 1.3)
 EXTRA_MEASURE_ARGS: list[str] = []
 #: Measure each recording a second time with these kinematics too (``--kinematics``).
 SECOND_KINEMATICS: list[str] = []
+#: What-ifs of that second measurement: a ``pi-lag`` drive declared ``pi-lag-weighted`` (its
+#: setpoint weight fitted from 1: ``--free-setpoint-weight``).
+DRIVE_MODEL_WHAT_IF: dict[str, bool] = {"free_setpoint_weight": False, "exact": False}
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -138,11 +149,33 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
         status = abu_main(args)
     if SECOND_KINEMATICS:
         s2 = measure_drive_model(rec, args, design, scn.fps, out)
+    if DRIVE_MODEL_WHAT_IF["exact"]:
+        s3 = measure_exact(args, state, out)
     rec.unlink()
     summary = json.loads((out / "m" / "summary.json").read_text()) if status == 0 else {}
     if SECOND_KINEMATICS:
         summary["second"] = s2
+    if DRIVE_MODEL_WHAT_IF["exact"]:
+        summary["exact"] = s3
     return status, {"scenario": scn, "state": state}, summary
+
+
+def measure_exact(args: list[str], state: dict, out: Path) -> dict:
+    """The same recording measured with the plant's exact omega and omega_dot (~0 bars), the
+    floor no kinematics can beat (``bench_width_floor.exact_kinematics``); its summary."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_width_floor import exact_kinematics
+
+    from measurement.inference import analysis
+    args = [*args[:args.index("--out") + 1], str(out / "ex"), *args[args.index("--out") + 2:]]
+    measured = analysis._kinematics
+    analysis._kinematics = exact_kinematics(state)
+    try:
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            status = abu_main(args)
+    finally:
+        analysis._kinematics = measured
+    return json.loads((out / "ex" / "summary.json").read_text()) if status == 0 else {}
 
 
 def measure_drive_model(rec: Path, args: list[str], design: dict, fps: float, out: Path
@@ -152,6 +185,8 @@ def measure_drive_model(rec: Path, args: list[str], design: dict, fps: float, ou
     summary ({"exit": status} when the command failed)."""
     drive = {k: v for k, v in design["drive"].items() if k not in ("units", "source")}
     drive["sample_time_s"] = 1.0 / fps
+    if DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] and drive["model"] == "pi-lag":
+        drive["model"] = "pi-lag-weighted"
     path = out / "drive.json"
     path.write_text(json.dumps(drive))
     args = [*args[:args.index("--out") + 1], str(out / "dm"), *args[args.index("--out") + 2:],
@@ -198,6 +233,8 @@ def one(job: tuple) -> dict:
                                        "kinematic_rel_bias_at_slip", "lower_bound_sup_z",
                                        "sigma_leftover_rad", "leftover_tau_s")})
     row["sigma_white_beta_rad"] = (mf.get("noise_model") or {}).get("sigma_white_rad")
+    if "exact" in s:
+        row["exact"] = {k: s["exact"].get(k) for k in ("mu_low", "mu_high", "relative_width")}
     if "second" in s:
         s2, est = s["second"], s["second"].get("estimator") or {}
         row["drive_model"] = {"exit": s2["exit"], "error": s2.get("error"),
@@ -307,6 +344,14 @@ def report_second(rows: list[dict], label: str) -> None:
     print(f"    measured / predicted (default's predictor): median {np.median(ratio):.3f}, 5-95 % "
           f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
           f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} %")
+    ex = [(d["relative_width"], d["w0"], r["exact"]["relative_width"])
+          for d, r in zip(dm, ok) if finite(d) and d["w0"] and (r.get("exact") or {}).get(
+              "relative_width")]
+    if ex:
+        e = np.array(ex)
+        print(f"    exact kinematics on the same recordings ({len(ex)}): median width "
+              f"{100 * np.median(e[:, 2]):.1f} %; width / exact: drive model median "
+              f"{np.median(e[:, 0] / e[:, 2]):.3f}, default {np.median(e[:, 1] / e[:, 2]):.3f}")
     if acc:
         parts = 100 * np.median([[(d["profile_mu_high"] - d["profile_mu_low"]) / d["mu"],
                                   (d["lower_bound_sup_z"] + 1.96)
@@ -358,6 +403,21 @@ def calibrate(rows: list[dict]) -> None:
           f"{100 * np.mean((res >= math.log(0.77)) & (res <= math.log(1.3))):.1f} %")
 
 
+def what_if_settings(error_rel: float | None, max_evaluations: int | None) -> None:
+    """Every drive-model fit of the in-process ``abu measure`` with these settings."""
+    from dataclasses import replace as dc_replace
+
+    from measurement.kinematics import drive_model as dm
+    changes = {k: v for k, v in (("error_rel", error_rel), ("max_evaluations", max_evaluations))
+               if v is not None}
+
+    def fit(self, time, theta, sigma_theta):
+        return dm.fit_drive_model(time, theta, self.drive, self.setpoints,
+                                  sigma_theta=sigma_theta,
+                                  settings=dc_replace(self.settings, **changes))
+    dm.DriveModelInput.fit = fit
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=1000, help="first seed")
@@ -375,7 +435,30 @@ def main() -> None:
     ap.add_argument("--kinematics", choices=["drive-model"], default=None,
                     help="measure each recording a second time with 'abu measure --kinematics "
                          "drive-model' (the design's drive and staircase) and print it beside")
+    ap.add_argument("--free-setpoint-weight", action="store_true",
+                    help="with --kinematics drive-model: declare a pi-lag drive as "
+                         "pi-lag-weighted (setpoint weight fitted, starting from 1)")
+    ap.add_argument("--timing-samples", type=float, default=None,
+                    help="with --kinematics drive-model: the drive model's timing bar looks "
+                         "this many controller samples either side (what-if; the module's "
+                         "TIMING_SAMPLES, 1)")
+    ap.add_argument("--error-rel", type=float, default=None,
+                    help="with --kinematics drive-model: the fit's discrepancy floor on "
+                         "omega_dot (what-if; DriveModelSettings.error_rel, 0.01)")
+    ap.add_argument("--max-evaluations", type=int, default=None,
+                    help="with --kinematics drive-model: the fit's most model evaluations "
+                         "(what-if; DriveModelSettings.max_evaluations, 200)")
+    ap.add_argument("--exact", action="store_true",
+                    help="with --kinematics drive-model: measure a third time with the "
+                         "plant's exact kinematics (the floor) and print the ratios to it")
     a = ap.parse_args()
+    DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] = a.free_setpoint_weight
+    DRIVE_MODEL_WHAT_IF["exact"] = a.exact
+    if a.error_rel is not None or a.max_evaluations is not None:
+        what_if_settings(a.error_rel, a.max_evaluations)
+    if a.timing_samples is not None:   # in-process abu measure: the module's constant
+        from measurement.kinematics import drive_model
+        drive_model.TIMING_SAMPLES = a.timing_samples
     if a.no_edge_step:   # before the worker pool forks
         EXTRA_MEASURE_ARGS.append("--no-edge-step")
     if a.kinematics:
