@@ -30,6 +30,24 @@ was not used for it. Run (two worker processes, about 30 min on the shared 2-cor
     python benchmarks/bench_designed_runs.py --report cal.jsonl      # figures of saved rows
 
 ``--rows FILE`` writes one JSON row per run (what ``--calibrate`` and ``--report`` read).
+
+``--kinematics drive-model`` measures each rendered recording a second time, with ``abu measure
+--kinematics drive-model``: the design's drive (its ``drive`` object, plus ``sample_time_s`` =
+the frame interval, the twin's controller sampling at the frame rate; the designed drives have
+no setpoint filter) over the design's staircase (``omega0_hz``, ``omega_end_hz``, ``t0_s``,
+``te_s``, ``step_hz``, ``rounding``: the staircase the twin's controller followed, on the
+record's clock). Printed beside the default: refusals (and why), finite bounds, coverage, the
+median width, and measured / predicted width against the same (default-kinematics) predictor::
+
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --kinematics drive-model
+
+What-ifs of that second measurement (not options of ``abu measure``): ``--free-setpoint-weight``
+declares a ``pi-lag`` drive as ``pi-lag-weighted`` (the setpoint weight fitted from 1: the
+twin's forward-Euler frame-rate integrator leaves a non-white residual when b is held at 1),
+``--timing-samples`` the drive model's timing bar (``TIMING_SAMPLES``; 0: none; the twin's
+frames are its controller's samples, a real camera's are not), ``--error-rel`` and
+``--max-evaluations`` the fit's settings; ``--exact`` measures a third time with the plant's
+exact kinematics (``bench_width_floor.exact_kinematics``: the floor no kinematics can beat).
 """
 from __future__ import annotations
 
@@ -66,6 +84,11 @@ RATIO_BAND = (0.77, 1.3)
 #: Options added to every ``abu measure`` of the designed runs (``--no-edge-step``: the
 #: contour fits alone, the tracker the width model was calibrated with).
 EXTRA_MEASURE_ARGS: list[str] = []
+#: Measure each recording a second time with these kinematics too (``--kinematics``).
+SECOND_KINEMATICS: list[str] = []
+#: What-ifs of that second measurement: a ``pi-lag`` drive declared ``pi-lag-weighted`` (its
+#: setpoint weight fitted from 1: ``--free-setpoint-weight``).
+DRIVE_MODEL_WHAT_IF: dict[str, bool] = {"free_setpoint_weight": False, "exact": False}
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -124,9 +147,62 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
     args += EXTRA_MEASURE_ARGS
     with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
         status = abu_main(args)
+    if SECOND_KINEMATICS:
+        s2 = measure_drive_model(rec, args, design, scn.fps, out)
+    if DRIVE_MODEL_WHAT_IF["exact"]:
+        s3 = measure_exact(args, state, out)
     rec.unlink()
     summary = json.loads((out / "m" / "summary.json").read_text()) if status == 0 else {}
+    if SECOND_KINEMATICS:
+        summary["second"] = s2
+    if DRIVE_MODEL_WHAT_IF["exact"]:
+        summary["exact"] = s3
     return status, {"scenario": scn, "state": state}, summary
+
+
+def measure_exact(args: list[str], state: dict, out: Path) -> dict:
+    """The same recording measured with the plant's exact omega and omega_dot (~0 bars), the
+    floor no kinematics can beat (``bench_width_floor.exact_kinematics``); its summary."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_width_floor import exact_kinematics
+
+    from measurement.inference import analysis
+    args = [*args[:args.index("--out") + 1], str(out / "ex"), *args[args.index("--out") + 2:]]
+    measured = analysis._kinematics
+    analysis._kinematics = exact_kinematics(state)
+    try:
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            status = abu_main(args)
+    finally:
+        analysis._kinematics = measured
+    return json.loads((out / "ex" / "summary.json").read_text()) if status == 0 else {}
+
+
+def measure_drive_model(rec: Path, args: list[str], design: dict, fps: float, out: Path
+                        ) -> dict:
+    """The same recording measured with ``--kinematics drive-model``: the design's drive with
+    the twin's controller sample time (the frame interval) over the design's staircase; the
+    summary ({"exit": status} when the command failed)."""
+    drive = {k: v for k, v in design["drive"].items() if k not in ("units", "source")}
+    drive["sample_time_s"] = 1.0 / fps
+    if DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] and drive["model"] == "pi-lag":
+        drive["model"] = "pi-lag-weighted"
+    path = out / "drive.json"
+    path.write_text(json.dumps(drive))
+    args = [*args[:args.index("--out") + 1], str(out / "dm"), *args[args.index("--out") + 2:],
+            "--kinematics", "drive-model", "--drive", str(path),
+            "--omega0-hz", repr(float(design["omega0_hz"])),
+            "--omega-end-hz", repr(float(design["omega_end_hz"])),
+            "--t0", repr(float(design["t0_s"])), "--te", repr(float(design["te_s"])),
+            "--step-hz", repr(float(design["step_hz"])), "--rounding", design["rounding"]]
+    err = io.StringIO()
+    with redirect_stdout(io.StringIO()), redirect_stderr(err):
+        status = abu_main(args)
+    if status != 0:
+        return {"exit": status, "error": err.getvalue().strip()[-300:]}
+    s = json.loads((out / "dm" / "summary.json").read_text())
+    s["exit"] = 0
+    return s
 
 
 def one(job: tuple) -> dict:
@@ -157,6 +233,18 @@ def one(job: tuple) -> dict:
                                        "kinematic_rel_bias_at_slip", "lower_bound_sup_z",
                                        "sigma_leftover_rad", "leftover_tau_s")})
     row["sigma_white_beta_rad"] = (mf.get("noise_model") or {}).get("sigma_white_rad")
+    if "exact" in s:
+        row["exact"] = {k: s["exact"].get(k) for k in ("mu_low", "mu_high", "relative_width")}
+    if "second" in s:
+        s2, est = s["second"], s["second"].get("estimator") or {}
+        row["drive_model"] = {"exit": s2["exit"], "error": s2.get("error"),
+                              "model": est.get("model"), "why": est.get("why"),
+                              **{k: s2.get(k) for k in ("mu_low", "mu_high", "relative_width",
+                                                        "status", "t_slip")},
+                              **{k: (s2.get("model_fit") or {}).get(k) for k in (
+                                  "profile_mu_low", "profile_mu_high",
+                                  "kinematic_rel_sigma_at_slip", "kinematic_rel_bias_at_slip",
+                                  "lower_bound_sup_z")}}
     row.update({k: nz.get(k) for k in ("sigma_theta_rad", "sigma_beta_rad",
                                        "sigma_omega_dot_rad_s2")})
     return row
@@ -222,6 +310,56 @@ def report(rows: list[dict], label: str) -> None:
               f"x 2 {med[2]:.1f} %, kinematic noise (z_lo + z) sigma {med[3]:.1f} %")
 
 
+def report_second(rows: list[dict], label: str) -> None:
+    """The same runs measured with the drive-model kinematics (``--kinematics drive-model``),
+    beside the default: refusals and why, finite bounds, coverage, widths; the ratio is
+    against the default's predictor (the width model knows no drive-model kinematics)."""
+    ok = [r for r in rows if r.get("exit") == 0 and "drive_model" in r]
+    if not ok:
+        return
+    dm = [{**r["drive_model"], "mu": r["mu"], "pred": r["pred"], "w0": r["relative_width"]}
+          for r in ok]
+    failed = [d for d in dm if d["exit"] != 0]
+    refused = [d for d in dm if d["exit"] == 0 and d["model"] != "accepted"]
+    meas = [d for d in dm if d["exit"] == 0]
+    fin = [d for d in meas if finite(d)]
+    print(f"  drive-model kinematics, same recordings: {len(meas)} measured "
+          f"({len(failed)} failed), model refused in {len(refused)} (the default's kinematics "
+          f"kept there), {len(fin)} with finite bounds "
+          f"({100 * len(fin) / max(len(dm), 1):.1f} %), coverage "
+          f"{100 * np.mean([covered(d) for d in meas]) if meas else math.nan:.1f} %")
+    for d in refused + failed:
+        print(f"    refused: {d.get('why') or d.get('error')}")
+    if not fin:
+        return
+    w = np.array([d["relative_width"] for d in fin])
+    ratio = np.array([d["relative_width"] / d["pred"]["expected"] for d in fin])
+    band = (ratio >= RATIO_BAND[0]) & (ratio <= RATIO_BAND[1])
+    pair = np.array([d["relative_width"] / d["w0"] for d in fin if d["w0"]])
+    acc = [d for d in fin if d["model"] == "accepted"]
+    print(f"    median measured width {100 * np.median(w):.1f} % (default "
+          f"{100 * np.median([d['w0'] for d in fin if d['w0']]):.1f} %), drive-model / default "
+          f"on the same run: median {np.median(pair):.3f}, 5-95 % "
+          f"[{np.percentile(pair, 5):.3f}, {np.percentile(pair, 95):.3f}]")
+    print(f"    measured / predicted (default's predictor): median {np.median(ratio):.3f}, 5-95 % "
+          f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
+          f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} %")
+    ex = [(d["relative_width"], d["w0"], r["exact"]["relative_width"])
+          for d, r in zip(dm, ok) if finite(d) and d["w0"] and (r.get("exact") or {}).get(
+              "relative_width")]
+    if ex:
+        e = np.array(ex)
+        print(f"    exact kinematics on the same recordings ({len(ex)}): median width "
+              f"{100 * np.median(e[:, 2]):.1f} %; width / exact: drive model median "
+              f"{np.median(e[:, 0] / e[:, 2]):.3f}, default {np.median(e[:, 1] / e[:, 2]):.3f}")
+    if acc:
+        parts = 100 * np.median([[(d["profile_mu_high"] - d["profile_mu_low"]) / d["mu"],
+                                  (d["lower_bound_sup_z"] + 1.96)
+                                  * d["kinematic_rel_sigma_at_slip"]] for d in acc], axis=0)
+        print(f"    accepted runs ({len(acc)}): beta profile {parts[0]:.1f} %, kinematic noise "
+              f"(z_lo + z) sigma {parts[1]:.1f} % (medians, relative to mu)")
+
+
 def calibrate(rows: list[dict]) -> None:
     """Fit the width model's free constants on measured rows (the calibration slice) and print
     them: sigma_beta and sigma_theta are the medians of what ``abu measure`` reported (beta:
@@ -265,6 +403,21 @@ def calibrate(rows: list[dict]) -> None:
           f"{100 * np.mean((res >= math.log(0.77)) & (res <= math.log(1.3))):.1f} %")
 
 
+def what_if_settings(error_rel: float | None, max_evaluations: int | None) -> None:
+    """Every drive-model fit of the in-process ``abu measure`` with these settings."""
+    from dataclasses import replace as dc_replace
+
+    from measurement.kinematics import drive_model as dm
+    changes = {k: v for k, v in (("error_rel", error_rel), ("max_evaluations", max_evaluations))
+               if v is not None}
+
+    def fit(self, time, theta, sigma_theta):
+        return dm.fit_drive_model(time, theta, self.drive, self.setpoints,
+                                  sigma_theta=sigma_theta,
+                                  settings=dc_replace(self.settings, **changes))
+    dm.DriveModelInput.fit = fit
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=1000, help="first seed")
@@ -279,9 +432,37 @@ def main() -> None:
     ap.add_argument("--no-edge-step", action="store_true",
                     help="measure with 'abu measure --no-edge-step' (the contour fits alone, "
                          "as when the width model was calibrated)")
+    ap.add_argument("--kinematics", choices=["drive-model"], default=None,
+                    help="measure each recording a second time with 'abu measure --kinematics "
+                         "drive-model' (the design's drive and staircase) and print it beside")
+    ap.add_argument("--free-setpoint-weight", action="store_true",
+                    help="with --kinematics drive-model: declare a pi-lag drive as "
+                         "pi-lag-weighted (setpoint weight fitted, starting from 1)")
+    ap.add_argument("--timing-samples", type=float, default=None,
+                    help="with --kinematics drive-model: the drive model's timing bar looks "
+                         "this many controller samples either side (what-if; the module's "
+                         "TIMING_SAMPLES, 1)")
+    ap.add_argument("--error-rel", type=float, default=None,
+                    help="with --kinematics drive-model: the fit's discrepancy floor on "
+                         "omega_dot (what-if; DriveModelSettings.error_rel, 0.01)")
+    ap.add_argument("--max-evaluations", type=int, default=None,
+                    help="with --kinematics drive-model: the fit's most model evaluations "
+                         "(what-if; DriveModelSettings.max_evaluations, 200)")
+    ap.add_argument("--exact", action="store_true",
+                    help="with --kinematics drive-model: measure a third time with the "
+                         "plant's exact kinematics (the floor) and print the ratios to it")
     a = ap.parse_args()
+    DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] = a.free_setpoint_weight
+    DRIVE_MODEL_WHAT_IF["exact"] = a.exact
+    if a.error_rel is not None or a.max_evaluations is not None:
+        what_if_settings(a.error_rel, a.max_evaluations)
+    if a.timing_samples is not None:   # in-process abu measure: the module's constant
+        from measurement.kinematics import drive_model
+        drive_model.TIMING_SAMPLES = a.timing_samples
     if a.no_edge_step:   # before the worker pool forks
         EXTRA_MEASURE_ARGS.append("--no-edge-step")
+    if a.kinematics:
+        SECOND_KINEMATICS.append(a.kinematics)
     if a.calibrate:
         calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
         return
@@ -295,7 +476,9 @@ def main() -> None:
               f"{max(r['seed'] for r in rows)}")
         for dname in DRIVES:
             report([r for r in rows if r["drive"] == dname], f"drive {dname}")
+            report_second([r for r in rows if r["drive"] == dname], f"drive {dname}")
         report(rows, "all runs")
+        report_second(rows, "all runs")
         return
     cfg = configs()
     designs = {c: run_design(*c, a.design_args.split()) for c in cfg}
@@ -327,7 +510,9 @@ def main() -> None:
           "lighting and lens of twin.scenario.random_scenario(seed)")
     for dname in DRIVES:
         report([r for r in rows if r["drive"] == dname], f"drive {dname}")
+        report_second([r for r in rows if r["drive"] == dname], f"drive {dname}")
     report(rows, "all runs")
+    report_second(rows, "all runs")
 
 
 if __name__ == "__main__":

@@ -171,3 +171,27 @@ def test_noise_from_sets_the_camera_noise_and_bad_files_are_refused(tmp_path, ca
                      "--noise-from", str(bad)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--noise-from" in err[0], err
+
+
+def test_designed_run_measured_again_with_the_drive_model():
+    """``bench_designed_runs.py --kinematics drive-model``: the same rendered recording measured
+    a second time with ``abu measure --kinematics drive-model`` from the design's drive (plus the
+    twin's controller sample time) and staircase. On a weighted PI drive (accepted in 18 of 18
+    validation runs) the fit is accepted, the bounds finite and mu covered; told a staircase
+    that starts 60 ms late (outside the fit's +-50 ms time offset), the fit is refused."""
+    bench = _bench()
+    bench.SECOND_KINEMATICS.append("drive-model")
+    mu_range, drive = (0.02, 0.04), "PI 15 ms b 0.8"
+    design = bench.run_design(mu_range, drive, [])
+    row = bench.one((2003, mu_range, drive, design))
+    dm = row["drive_model"]
+    print(f"\n[drive model] seed 2003 {drive}: default {100 * row['relative_width']:.1f} %, "
+          f"drive model {dm['model']} {100 * (dm['relative_width'] or float('nan')):.1f} %")
+    assert row["exit"] == 0 and dm["exit"] == 0, row
+    assert dm["model"] == "accepted", dm["why"]
+    assert bench.finite(dm) and bench.covered({**dm, "mu": row["mu"]}), dm
+    told = bench.measure_drive_model
+    bench.measure_drive_model = lambda rec, args, d, fps, out: told(
+        rec, args, {**d, "t0_s": d["t0_s"] + 0.06}, fps, out)
+    wrong = bench.one((2003, mu_range, drive, design))["drive_model"]
+    assert wrong["model"] == "refused", wrong
