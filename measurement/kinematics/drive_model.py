@@ -276,6 +276,21 @@ def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     theta over the whole record; the residual tests of the module doc decide acceptance.
     Shared by the staircase loop and the prescribed profile
     (:mod:`measurement.kinematics.profile_model`)."""
+    # Within the bounds the optimiser may try an unstable loop (a torque lag too long for its
+    # gain, tau > 2 zeta / omega_n): its response overflows to inf / nan, which least_squares
+    # rejects as a step. NumPy's warnings about it would reach the user's terminal (or stop a
+    # run that treats warnings as errors), so they are silenced here, and a fit whose own
+    # kinematics are not finite is refused.
+    with np.errstate(over="ignore", invalid="ignore"):
+        fit = _fit_model(t, th, model, sigma, st)
+    if fit.accepted and not (np.all(np.isfinite(fit.omega_dot))
+                             and np.all(np.isfinite(fit.sigma_omega_dot))):
+        fit.accepted, fit.why = False, "the fitted loop's response is not finite (unstable)"
+    return fit
+
+
+def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
+               st: DriveModelSettings) -> DriveFit:
     from scipy.optimize import least_squares
 
     dt = sample_interval(t)
