@@ -45,6 +45,20 @@ def record(seed: int, ripple: float = 0.0):
     return t, theta + lens + SIGMA * rng.standard_normal(t.size), alpha
 
 
+
+def _tally(fit, sg, alpha: np.ndarray, checks, inside: list, err_m: list,
+           err_sg: list) -> None:
+    """Add one record's omega_dot errors at ``checks`` (model and SG) and whether the model's
+    95 % bar holds the truth there."""
+    e = fit.omega_dot[checks] - alpha[checks]
+    inside.extend(np.abs(e) <= 1.96 * fit.sigma_omega_dot[checks])
+    err_m.extend(e)
+    err_sg.extend(sg.omega_dot[checks] - alpha[checks])
+
+
+def _rms(errors: list) -> float:
+    return float(np.sqrt(np.mean(np.square(errors))))
+
 def test_poles_are_those_of_python_control():
     control = pytest.importorskip("control")   # third party, a second implementation
     p, _ = modes(0.8, 15.0, 0.02, 0.7)
@@ -62,11 +76,8 @@ def test_exact_model_is_accepted_covered_and_beats_savgol():
         fit = fit_drive_model(t, th, drive(1.1), SP, sigma_theta=SIGMA)
         sg = savgol_kinematics(t, th, window_s=0.042, polyorder=9, sigma_theta=SIGMA)
         accepted += fit.accepted
-        e = fit.omega_dot[checks] - alpha[checks]
-        inside.extend(np.abs(e) <= 1.96 * fit.sigma_omega_dot[checks])
-        err_m.extend(e)
-        err_sg.extend(sg.omega_dot[checks] - alpha[checks])
-    rms_m, rms_sg = np.sqrt(np.mean(np.square(err_m))), np.sqrt(np.mean(np.square(err_sg)))
+        _tally(fit, sg, alpha, checks, inside, err_m, err_sg)
+    rms_m, rms_sg = _rms(err_m), _rms(err_sg)
     print(f"\nexact loop + lens + noise, 20 seeds: accepted {accepted}, coverage "
           f"{np.mean(inside):.0%}, RMS omega_dot model {rms_m:.3f} SG {rms_sg:.3f} rad/s^2")
     assert accepted >= 18
@@ -193,11 +204,8 @@ def test_digital_twin_drive_with_its_filter_and_sample_time_is_accepted():
         sg = savgol_kinematics(t, th, window_s=0.042, polyorder=9, sigma_theta=SIGMA)
         acc_new += fit.accepted
         acc_old += old.accepted
-        e = fit.omega_dot[checks] - alpha[checks]
-        inside.extend(np.abs(e) <= 1.96 * fit.sigma_omega_dot[checks])
-        err_m.extend(e)
-        err_sg.extend(sg.omega_dot[checks] - alpha[checks])
-    rms_m, rms_sg = np.sqrt(np.mean(np.square(err_m))), np.sqrt(np.mean(np.square(err_sg)))
+        _tally(fit, sg, alpha, checks, inside, err_m, err_sg)
+    rms_m, rms_sg = _rms(err_m), _rms(err_sg)
     print(f"\ntwin's digital PI, 12 records: accepted {acc_new} (continuous, no filter: "
           f"{acc_old}), coverage {np.mean(inside):.0%}, RMS omega_dot model {rms_m:.3f} SG "
           f"{rms_sg:.3f} rad/s^2")
