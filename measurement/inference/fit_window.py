@@ -45,6 +45,12 @@ class Window:
         """First sample of the window in the record."""
         return self.region.start
 
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of beta's residual variance in the window (>= 1): samples less
+        the nuisance columns, mu and mu_d."""
+        return max(self.t.size - self.x.shape[1] - 2, 1)
+
     def head(self, n: int) -> "Window":
         """The first ``n`` samples."""
         return Window(self.region, self.t[:n], self.theta[:n], self.beta[:n], self.omega[:n],

@@ -192,7 +192,7 @@ def _long_run_factor(win: Window, fit: _NoiseFit, mu_grid: np.ndarray,
 
 def _noise_variance(rss: np.ndarray, best: int, lrf: float, win: Window) -> float:
     """Residual variance per degree of freedom at the best mu [rad^2] (times ``lrf``)."""
-    return max(lrf * float(rss[best]) / max(win.t.size - win.x.shape[1] - 2, 1), 1e-300)
+    return max(lrf * float(rss[best]) / win.dof, 1e-300)
 
 
 def _refine_mu_grid(mu_grid: np.ndarray, fit: _NoiseFit, lrf: float, win: Window,
@@ -388,7 +388,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
                             opt.max_episodes)
     # a mu the refinements of mu_d cannot bring within crit is not refined; only while the
     # statistic is the plain RSS ratio (a long-run factor divides it after the profile)
-    profile = MuDProfile(models, opt.mu_d_refine, crit if opt.lrv_window_s <= 0 else None)
+    profile = MuDProfile(models, opt.mu_d_refine, win.dof,
+                         crit if opt.lrv_window_s <= 0 else None)
     lighting = None
     orders = tuple(k for k in opt.leftover_orders if k not in opt.harmonic_orders)
     if orders and opt.noise_model == "leftover" and record_residual is not None:

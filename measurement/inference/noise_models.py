@@ -162,9 +162,6 @@ class Gls:
     def __init__(self, y: np.ndarray, x: np.ndarray, rho: float,
                  winv: np.ndarray | None = None):
         self.rho = float(rho)
-        # degrees of freedom of the residual variance (the inference's own count, with every
-        # nuisance column, so at most the rank's: a statistic computed with it is not larger)
-        self.dof = float(y.size - x.shape[1] - 2)
         self.winv = winv    # inverse Cholesky factor of a full covariance (overrides rho)
         self.yw = self.whiten(y[None, :])[0]
         xw = self.whiten(x.T).T

@@ -75,15 +75,18 @@ class MuDProfile:
     Args:
         models: the fit window's :class:`SlipModelCache`.
         refinements: shrinking 5-point refinements of mu_d / mu per mu (step / 2.5 each).
+        dof: degrees of freedom of the residual variance that scales the statistic
+            (``Window.dof``).
         prune_stat: skip the refinements of a mu whose likelihood-ratio statistic stays above
             this many chi^2 units whatever they find (:func:`refinement_needed`); None: refine
             every mu.
     """
 
-    def __init__(self, models: SlipModelCache, refinements: int,
+    def __init__(self, models: SlipModelCache, refinements: int, dof: int,
                  prune_stat: float | None = None) -> None:
         self.models = models
         self.refinements = int(refinements)
+        self.dof = dof
         self.prune_stat = prune_stat
         self._known: dict = {}
 
@@ -120,7 +123,7 @@ class MuDProfile:
         live = np.arange(new.size)
         if self.prune_stat is not None:
             live = np.flatnonzero(refinement_needed(rss, min(best_known, float(val.min())),
-                                                    gls.dof, self.prune_stat))
+                                                    self.dof, self.prune_stat))
         rows = np.arange(live.size)
         for _ in range(self.refinements):
             if live.size == 0:
