@@ -187,6 +187,36 @@ def test_setpoint_filter_response_matches_python_control():
         assert np.max(np.abs(response(sp, t, zeta, wn, tau, b).omega - r.omega)) > 0.05 * np.ptp(u)
 
 
+def test_setpoint_filter_on_another_pole_is_split_and_stays_accurate():
+    """tau_f on one of the loop's real poles (a double pole: zeta > 1, or the torque lag's pole)
+    and on the double pole of zeta = 1 (a triple one): modes() must split them (residues are
+    finite) and the response must match an independent exact solver, SciPy's state-space
+    zero-order hold (exact for steps on the grid), to 1e-4 of the setpoint's range in omega
+    and of |alpha|'s peak (measured: <= 1.3e-5, vs 1e-13 for distinct poles)."""
+    from scipy import signal
+
+    from abu_model.loop_response import loop_polynomials
+    sp = Setpoints((0.1, 0.25), (3.0, 10.0, 4.0))
+    t = np.linspace(0.0, 1.0, 20001)
+    u = sp.value(t) - 3.0
+    slow, fast = np.sort(np.roots([1.0, 2 * 1.5 * 20.0, 400.0]).real)[::-1]
+    lag = np.roots([0.02, 1.0, 2 * 0.7 * 12.0, 144.0])
+    lag = float(lag[np.abs(lag.imag) < 1e-9].real[0])
+    for zeta, wn, tau, b, tau_f in [(1.5, 20.0, 0.0, 1.0, -1 / slow),
+                                    (1.5, 20.0, 0.0, 1.0, -1 / fast),
+                                    (0.7, 12.0, 0.02, 0.6, -1 / lag),
+                                    (1.0, 20.0, 0.0, 1.0, 1 / 20.0),
+                                    (1.0, 20.0, 0.0, 0.7, 1 / 20.0)]:
+        poles, res = modes(zeta, wn, tau, b, tau_f)
+        assert np.all(np.isfinite(res)) and np.min(np.abs(np.diff(np.sort_complex(poles)))) > 0
+        a, bb, c, d = signal.tf2ss(*loop_polynomials(zeta, wn, tau, b, tau_f))
+        _, y, x = signal.lsim((a, bb, c, d), u, t, interp=False)
+        alpha = (c @ a @ x.T).ravel()          # relative degree >= 2: no feed-through in w'
+        r = response(sp, t, zeta, wn, tau, b, setpoint_tau=tau_f)
+        assert np.max(np.abs(y + 3.0 - r.omega)) < 1e-4 * np.ptp(u), (zeta, tau, tau_f)
+        assert np.max(np.abs(alpha - r.alpha)) < 1e-4 * np.max(np.abs(alpha)), (zeta, tau, tau_f)
+
+
 def test_digital_twin_drive_with_its_filter_and_sample_time_is_accepted():
     """12 records of the harsh twin's digital PI (8 with a 2-20 ms setpoint filter): declared
     with its filter and sample time, the fit (loop fitted freely) is accepted in >= 10, its
