@@ -260,6 +260,10 @@ def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, flo
                                and math.isfinite(v) for v in pair) or pair[0] > pair[1]):
                 raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
                                      key)
+            if name in PI_OPTIONAL and (pair[0] < 0.0 or pair[1] > UPPER[name]):
+                # the fit starts at its middle and puts its prior there: within the field's range
+                raise DriveFileError(source, f"expected 0 <= low <= high <= {UPPER[name]:g}, got "
+                                             f"{pair!r}", key)
             ci95[name] = (float(pair[0]), float(pair[1]))
     return ci95
 

@@ -300,7 +300,16 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
                          ({"setpoint_tau_s": 5.0}, "setpoint_tau_s"),
                          ({"sample_time_s": 0.0}, "sample_time_s"),
                          ({"sample_time_s": "1 ms"}, "sample_time_s"),
-                         ({"setpoint_tau_s_ci95": [0.02, 0.01]}, "setpoint_tau_s_ci95")]:
+                         ({"setpoint_tau_s": float("nan")}, "setpoint_tau_s"),
+                         ({"setpoint_tau_s": float("inf")}, "setpoint_tau_s"),
+                         ({"setpoint_tau_s": None}, "setpoint_tau_s"),
+                         ({"sample_time_s": -1e-3}, "sample_time_s"),
+                         ({"sample_time_s": float("nan")}, "sample_time_s"),
+                         ({"sample_time_s": 1e300}, "sample_time_s"),
+                         ({"setpoint_tau_s_ci95": [0.02, 0.01]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [-0.01, 0.02]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [0.01, 1e300]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [0.01, float("inf")]}, "setpoint_tau_s_ci95")]:
         with pytest.raises(DriveFileError, match=name):
             drive_from_dict({**good, **change}, "x.json")
     tracking = {"kind": "abu-drive", "format_version": 1, "model": "tracking",
