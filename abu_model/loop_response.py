@@ -71,7 +71,11 @@ def sampled(setpoints: Setpoints, period: float | None) -> Setpoints:
         return setpoints
     # a step within 1e-9 of a sample counts as on it (the times carry rounding errors)
     times = np.ceil(np.asarray(setpoints.step_times, float) / period - 1e-9) * period
-    return Setpoints(tuple(float(v) for v in times), setpoints.levels)
+    # one step per sample (the last level wins): a zero gap would cut the drive model's
+    # step-locked test to nothing (its window is the shortest gap between steps)
+    last = np.append(np.diff(times) > 0, True)
+    levels = (setpoints.levels[0],) + tuple(np.asarray(setpoints.levels[1:])[last].tolist())
+    return Setpoints(tuple(float(v) for v in times[last]), levels)
 
 
 def as_setpoints(obj) -> Setpoints:

@@ -217,6 +217,26 @@ def test_setpoint_filter_on_another_pole_is_split_and_stays_accurate():
         assert np.max(np.abs(alpha - r.alpha)) < 1e-4 * np.max(np.abs(alpha)), (zeta, tau, tau_f)
 
 
+def test_steps_on_one_controller_sample_merge_and_keep_the_step_locked_test():
+    """Two steps within one sample time of the controller act at the same sample: sampled()
+    gives one step to the later level (same response), so the step-locked whiteness test keeps
+    its window (a zero gap between steps used to cut it to nothing, silently)."""
+    from abu_model.loop_response import sampled
+    from measurement.kinematics.drive_model import DriveModelSettings, _Model
+    sp = Setpoints((0.0101, 0.0105, 0.03, 0.05, 0.07), (0.0, 1.0, 2.0, 3.0, 4.0, 5.0))
+    merged = sampled(sp, 1e-3)
+    assert np.allclose(merged.step_times, (0.011, 0.03, 0.05, 0.07))
+    assert merged.levels == (0.0, 2.0, 3.0, 4.0, 5.0)
+    t = np.arange(1000) / 1000.0
+    raw = Setpoints((0.011, 0.011, 0.03, 0.05, 0.07), sp.levels)   # the old, unmerged form
+    assert np.allclose(response(merged, t, 0.7, 12.0).theta, response(raw, t, 0.7, 12.0).theta,
+                       rtol=0, atol=1e-12)
+    model = _Model(t, Drive("pi-lag", 0.7, 12.0, 0.02, sample_time=1e-3), sp,
+                   DriveModelSettings())
+    frames, window = model.step_frames(np.asarray(model.x0))
+    assert frames.tolist() == [11, 30, 50, 70] and window == 16
+
+
 def test_digital_twin_drive_with_its_filter_and_sample_time_is_accepted():
     """12 records of the harsh twin's digital PI (8 with a 2-20 ms setpoint filter): declared
     with its filter and sample time, the fit (loop fitted freely) is accepted in >= 10, its
