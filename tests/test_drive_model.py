@@ -341,6 +341,7 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
 
 def test_simulate_refuses_a_drive_with_a_filter_or_a_sample_time(tmp_path, capsys):
     for name, kw in (("setpoint_tau_s", {"setpoint_tau": 0.01}),
+                     ("setpoint_tau_s", {"ci95": {"setpoint_tau_s": (0.005, 0.02)}}),
                      ("sample_time_s", {"sample_time": 1e-3})):
         from controller.drive import dumps_drive
         (tmp_path / "f.json").write_text(dumps_drive(Drive("pi-lag", 0.7, 12.0, 0.02, **kw)))
