@@ -136,6 +136,12 @@ def test_measure_names_each_bad_staircase_option_and_refuses_them_without_the_mo
         assert abu_main(argv) == 2, option
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and option in err[0], (option, err)
+    # a controller sampling slower than the steps come (25-130 ms apart) cannot act on each
+    drive_json.write_text(dumps_drive(Drive("pi-lag", 0.5, 2.2, 0.0, sample_time=0.05)))
+    argv = base + [a for k, v in stair.items() for a in (k, v)]
+    assert abu_main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sample_time_s" in err[0] and "--drive" in err[0], err
     # the staircase options serve only the drive model: without it they are refused
     assert abu_main(["measure", str(tmp_path / "none.csv"), "--tracks", "--out",
                      str(tmp_path / "o"), "--omega0-hz", "-9"]) == 2
