@@ -138,7 +138,7 @@ class Drive:
             _check_number(src, "sample_time_s", self.sample_time, 0.0, strict=True)
         if self.model == "tracking":
             _check_number(src, "bandwidth_rad_s", self.bandwidth, 0.0, strict=True)
-            for name, absent in (("setpoint_tau_s", self.setpoint_tau == 0.0),
+            for name, absent in (("setpoint_tau_s", not self.has_setpoint_filter),
                                  ("sample_time_s", self.sample_time is None)):
                 if not absent:
                     raise DriveFileError(src, "not a parameter of the tracking model", name)
@@ -150,6 +150,12 @@ class Drive:
     def is_tracking(self) -> bool:
         """A drive that tracks a prescribed profile (``profile.json``), not a staircase."""
         return self.model == "tracking"
+
+    @property
+    def has_setpoint_filter(self) -> bool:
+        """A setpoint filter is declared: ``setpoint_tau_s`` > 0 or its interval alone (the
+        drive model then fits it from the interval's middle)."""
+        return self.setpoint_tau > 0.0 or "setpoint_tau_s" in self.ci95
 
     @property
     def theta_ref_mode(self) -> str:
@@ -260,6 +266,10 @@ def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, flo
                                and math.isfinite(v) for v in pair) or pair[0] > pair[1]):
                 raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
                                      key)
+            if name in PI_OPTIONAL and (pair[0] < 0.0 or pair[1] > UPPER[name]):
+                # the fit starts at its middle and puts its prior there: within the field's range
+                raise DriveFileError(source, f"expected 0 <= low <= high <= {UPPER[name]:g}, got "
+                                             f"{pair!r}", key)
             ci95[name] = (float(pair[0]), float(pair[1]))
     return ci95
 

@@ -98,6 +98,11 @@ def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
     design = design_staircase(spec)
     corners = drive_corners(drive)
     assert len(corners) == 8 and design.ci_corners_hold
+    # a setpoint filter's interval is a fourth axis (declared by its interval alone, too)
+    for tau_f in (0.01, 0.0):
+        filt = drive_corners(replace(drive, setpoint_tau=tau_f,
+                                     ci95={**ci, "setpoint_tau_s": (0.005, 0.02)}))
+        assert len(filt) == 16 and {c.setpoint_tau for c in filt} == {0.005, 0.02}
     assert drive_corners(Drive()) == [] and design_staircase(
         DesignSpec(0.02, 0.04)).ci_corners_hold is None  # no intervals: nothing claimed
     assert all(holds(replace(spec, drive=c), design.staircase) for c in corners)

@@ -136,6 +136,12 @@ def test_measure_names_each_bad_staircase_option_and_refuses_them_without_the_mo
         assert abu_main(argv) == 2, option
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and option in err[0], (option, err)
+    # a controller sampling slower than the steps come (25-130 ms apart) cannot act on each
+    drive_json.write_text(dumps_drive(Drive("pi-lag", 0.5, 2.2, 0.0, sample_time=0.05)))
+    argv = base + [a for k, v in stair.items() for a in (k, v)]
+    assert abu_main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sample_time_s" in err[0] and "--drive" in err[0], err
     # the staircase options serve only the drive model: without it they are refused
     assert abu_main(["measure", str(tmp_path / "none.csv"), "--tracks", "--out",
                      str(tmp_path / "o"), "--omega0-hz", "-9"]) == 2
@@ -185,6 +191,56 @@ def test_setpoint_filter_response_matches_python_control():
         assert np.max(np.abs(fr.outputs + u[0] - r.omega)) < 2e-3 * np.ptp(u)
         # the filter changes the response by far more than that
         assert np.max(np.abs(response(sp, t, zeta, wn, tau, b).omega - r.omega)) > 0.05 * np.ptp(u)
+
+
+def test_setpoint_filter_on_another_pole_is_split_and_stays_accurate():
+    """tau_f on one of the loop's real poles (a double pole: zeta > 1, or the torque lag's pole)
+    and on the double pole of zeta = 1 (a triple one): modes() must split them (residues are
+    finite) and the response must match an independent exact solver, SciPy's state-space
+    zero-order hold (exact for steps on the grid), to 1e-4 of the setpoint's range in omega
+    and of |alpha|'s peak (measured: <= 1.3e-5, vs 1e-13 for distinct poles)."""
+    from scipy import signal
+
+    from abu_model.loop_response import loop_polynomials
+    sp = Setpoints((0.1, 0.25), (3.0, 10.0, 4.0))
+    t = np.linspace(0.0, 1.0, 20001)
+    u = sp.value(t) - 3.0
+    slow, fast = np.sort(np.roots([1.0, 2 * 1.5 * 20.0, 400.0]).real)[::-1]
+    lag = np.roots([0.02, 1.0, 2 * 0.7 * 12.0, 144.0])
+    lag = float(lag[np.abs(lag.imag) < 1e-9].real[0])
+    for zeta, wn, tau, b, tau_f in [(1.5, 20.0, 0.0, 1.0, -1 / slow),
+                                    (1.5, 20.0, 0.0, 1.0, -1 / fast),
+                                    (0.7, 12.0, 0.02, 0.6, -1 / lag),
+                                    (1.0, 20.0, 0.0, 1.0, 1 / 20.0),
+                                    (1.0, 20.0, 0.0, 0.7, 1 / 20.0)]:
+        poles, res = modes(zeta, wn, tau, b, tau_f)
+        assert np.all(np.isfinite(res)) and np.min(np.abs(np.diff(np.sort_complex(poles)))) > 0
+        a, bb, c, d = signal.tf2ss(*loop_polynomials(zeta, wn, tau, b, tau_f))
+        _, y, x = signal.lsim((a, bb, c, d), u, t, interp=False)
+        alpha = (c @ a @ x.T).ravel()          # relative degree >= 2: no feed-through in w'
+        r = response(sp, t, zeta, wn, tau, b, setpoint_tau=tau_f)
+        assert np.max(np.abs(y + 3.0 - r.omega)) < 1e-4 * np.ptp(u), (zeta, tau, tau_f)
+        assert np.max(np.abs(alpha - r.alpha)) < 1e-4 * np.max(np.abs(alpha)), (zeta, tau, tau_f)
+
+
+def test_steps_on_one_controller_sample_merge_and_keep_the_step_locked_test():
+    """Two steps within one sample time of the controller act at the same sample: sampled()
+    gives one step to the later level (same response), so the step-locked whiteness test keeps
+    its window (a zero gap between steps used to cut it to nothing, silently)."""
+    from abu_model.loop_response import sampled
+    from measurement.kinematics.drive_model import DriveModelSettings, _Model
+    sp = Setpoints((0.0101, 0.0105, 0.03, 0.05, 0.07), (0.0, 1.0, 2.0, 3.0, 4.0, 5.0))
+    merged = sampled(sp, 1e-3)
+    assert np.allclose(merged.step_times, (0.011, 0.03, 0.05, 0.07))
+    assert merged.levels == (0.0, 2.0, 3.0, 4.0, 5.0)
+    t = np.arange(1000) / 1000.0
+    raw = Setpoints((0.011, 0.011, 0.03, 0.05, 0.07), sp.levels)   # the old, unmerged form
+    assert np.allclose(response(merged, t, 0.7, 12.0).theta, response(raw, t, 0.7, 12.0).theta,
+                       rtol=0, atol=1e-12)
+    model = _Model(t, Drive("pi-lag", 0.7, 12.0, 0.02, sample_time=1e-3), sp,
+                   DriveModelSettings())
+    frames, window = model.step_frames(np.asarray(model.x0))
+    assert frames.tolist() == [11, 30, 50, 70] and window == 16
 
 
 def test_digital_twin_drive_with_its_filter_and_sample_time_is_accepted():
@@ -270,7 +326,16 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
                          ({"setpoint_tau_s": 5.0}, "setpoint_tau_s"),
                          ({"sample_time_s": 0.0}, "sample_time_s"),
                          ({"sample_time_s": "1 ms"}, "sample_time_s"),
-                         ({"setpoint_tau_s_ci95": [0.02, 0.01]}, "setpoint_tau_s_ci95")]:
+                         ({"setpoint_tau_s": float("nan")}, "setpoint_tau_s"),
+                         ({"setpoint_tau_s": float("inf")}, "setpoint_tau_s"),
+                         ({"setpoint_tau_s": None}, "setpoint_tau_s"),
+                         ({"sample_time_s": -1e-3}, "sample_time_s"),
+                         ({"sample_time_s": float("nan")}, "sample_time_s"),
+                         ({"sample_time_s": 1e300}, "sample_time_s"),
+                         ({"setpoint_tau_s_ci95": [0.02, 0.01]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [-0.01, 0.02]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [0.01, 1e300]}, "setpoint_tau_s_ci95"),
+                         ({"setpoint_tau_s_ci95": [0.01, float("inf")]}, "setpoint_tau_s_ci95")]:
         with pytest.raises(DriveFileError, match=name):
             drive_from_dict({**good, **change}, "x.json")
     tracking = {"kind": "abu-drive", "format_version": 1, "model": "tracking",
@@ -282,6 +347,7 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
 
 def test_simulate_refuses_a_drive_with_a_filter_or_a_sample_time(tmp_path, capsys):
     for name, kw in (("setpoint_tau_s", {"setpoint_tau": 0.01}),
+                     ("setpoint_tau_s", {"ci95": {"setpoint_tau_s": (0.005, 0.02)}}),
                      ("sample_time_s", {"sample_time": 1e-3})):
         from controller.drive import dumps_drive
         (tmp_path / "f.json").write_text(dumps_drive(Drive("pi-lag", 0.7, 12.0, 0.02, **kw)))

@@ -74,7 +74,14 @@ def drive_model_from_args(args: argparse.Namespace):
                              "a speed of the same sign as --omega0-hz (the drive turns one way)")
     stair = Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0, args.te,
                       step=args.step_hz * HZ, rounding=args.rounding)
-    return DriveModelInput(drive, as_setpoints(stair))
+    setpoints = as_setpoints(stair)
+    gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
+    if drive.sample_time is not None and gaps and min(gaps) <= drive.sample_time:
+        # the model has the controller put each step on a sample of its own
+        raise ParameterError("--drive", args.drive, f"a drive whose sample_time_s "
+                             f"({drive.sample_time:g} s) is below the staircase's shortest "
+                             f"step spacing ({min(gaps):.3g} s): steps would share a sample")
+    return DriveModelInput(drive, setpoints)
 
 
 def _profile_input(args: argparse.Namespace, drive):

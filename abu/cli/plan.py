@@ -56,7 +56,7 @@ def apply_drive_to_args(args: argparse.Namespace) -> None:
         raise ParameterError("--drive", args.drive, "a drive without setpoint weighting "
                              f"(setpoint_weight 1, this one {drive.setpoint_weight:.4g}): the "
                              "simulated controller has none; identify with --model pi-lag")
-    for name, absent in (("setpoint_tau_s", drive.setpoint_tau == 0.0),
+    for name, absent in (("setpoint_tau_s", not drive.has_setpoint_filter),
                          ("sample_time_s", drive.sample_time is None)):
         if not absent:
             raise ParameterError("--drive", args.drive, f"a drive without {name} (the "

@@ -381,17 +381,19 @@ def _with_width(design: Design) -> Design:
 
 def drive_corners(drive: Drive) -> list[Drive]:
     """The drive at every corner of its 95 % intervals (empty without intervals)."""
-    names = [n for n in MODEL_PARAMETERS[drive.model] if n in drive.ci95]
+    # the setpoint filter's interval too (the drive model fits it like the loop's parameters)
+    every = MODEL_PARAMETERS["pi-lag-weighted"] + ("setpoint_tau_s",)
+    names = [n for n in MODEL_PARAMETERS[drive.model] + ("setpoint_tau_s",) if n in drive.ci95]
     if not names:
         return []
     out = []
     for corner in itertools.product(*(drive.ci95[n] for n in names)):
-        v = {n: drive.value(n) for n in MODEL_PARAMETERS["pi-lag-weighted"]}
+        v = {n: drive.value(n) for n in every}
         v.update(zip(names, corner))
         out.append(Drive(drive.model, v["zeta"], v["omega_n_rad_s"],
                          v["tau_motor_s"] if drive.model != "second-order" else 0.0,
                          v["setpoint_weight"] if drive.model == "pi-lag-weighted" else 1.0,
-                         setpoint_tau=drive.setpoint_tau, sample_time=drive.sample_time))
+                         setpoint_tau=v["setpoint_tau_s"], sample_time=drive.sample_time))
     return out
 
 

@@ -2,10 +2,8 @@
 
 The closed-form response lives in :mod:`abu_model.loop_response` (NumPy only, below both
 ``harness`` and ``measurement``: the measurement's drive-model kinematics use it too); it is
-re-exported here with the python-control transfer functions of the loop, which tests and the
-identification's reports use:
-
-    G(s) = w / w_ref = (2 zeta wn b s + wn^2) / (tau s^3 + s^2 + 2 zeta wn s + wn^2).
+re-exported here with the python-control transfer function of the loop, which the tests
+compare with control.forced_response (G(s) and the setpoint filter's pole: see that module).
 """
 from __future__ import annotations
 
@@ -25,12 +23,6 @@ def loop_tf(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0,
     as a python-control transfer function."""
     num, den = loop_polynomials(zeta, omega_n, tau, weight, setpoint_tau)
     return control.tf(list(num), list(den))
-
-
-def drive_tf(drive: Drive) -> control.TransferFunction:
-    """w / w_ref of an identified drive (its setpoint filter included; continuous time)."""
-    return loop_tf(drive.zeta, drive.omega_n, drive.tau_motor, drive.setpoint_weight,
-                   drive.setpoint_tau)
 
 
 def drive_response(drive: Drive, setpoints: Setpoints, t: Sequence[float] | np.ndarray,

@@ -155,7 +155,7 @@ class _Model:
                 continue
             if name == "setpoint_weight" and drive.model != "pi-lag-weighted":
                 continue
-            if name == "setpoint_tau_s" and not (value > 0 or name in drive.ci95):
+            if name == "setpoint_tau_s" and not drive.has_setpoint_filter:
                 continue   # the drive has no setpoint filter
             ci = drive.ci95.get(name)
             if ci is not None and not settings.free_loop:
