@@ -12,6 +12,8 @@ first sample), mu_d / mu from 0.3 to 1; direction +-1; max_episodes None, 0, 1 o
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -183,12 +185,27 @@ def _args(n=50, m=3):
     (9, np.empty(4), ValueError, "'onset' holds 4 values, needs 3"),
     (0, np.zeros(1), ValueError, "'t' needs at least 2 samples"),
     (6, "x", TypeError, "must be real number"),
+    (1, np.r_[0.02 * np.ones(49), np.nan], ValueError, "'q' holds a non-finite value at index 49"),
+    (2, np.r_[np.inf, 60.0 * np.ones(49)], ValueError, "'omega' holds a non-finite value at "
+                                                        "index 0"),
+    (3, np.array([0.01, np.nan, 0.01]), ValueError, "'mu' holds a non-finite value at index 1"),
+    (4, np.array([0.008, 0.008, -np.inf]), ValueError, "'mu_d' holds a non-finite value at "
+                                                       "index 2"),
+    (0, np.r_[np.arange(49) / 4500.0, np.nan], ValueError, "'t' holds a non-finite value"),
+    (0, np.zeros(50), ValueError, "'t' must increase (t[1] > t[0])"),
+    (0, -np.arange(50) / 4500.0, ValueError, "'t' must increase"),
+    (0, np.r_[-1e308, 1e308, np.ones(48)], ValueError, "'t' must increase"),
+    (5, np.nan, ValueError, "'direction' and 'd_over_l' must be finite"),
+    (6, np.inf, ValueError, "'direction' and 'd_over_l' must be finite"),
 ])
 def test_bad_buffers_are_refused(slot, value, error, words):
     args = _args()
+    args[8][:], args[9][:] = 7.0, 7.0
     args[slot] = value
-    with pytest.raises(error, match=words.replace("(", r"\(")):
+    with pytest.raises(error, match=re.escape(words)):
         KERNEL.slip(*args)
+    if slot not in (8, 9):   # refused before anything is written
+        assert (args[8] == 7.0).all() and (args[9] == 7.0).all()
 
 
 @needs_kernel
@@ -213,6 +230,31 @@ def test_odd_inputs_go_through_the_reference():
     np.testing.assert_array_equal(on, on_ref)
     with pytest.raises(IndexError):
         S.slip_displacement(np.zeros(1), np.zeros(1), np.ones(1), np.ones(1), np.ones(1), 1, 0.2)
+
+
+@pytest.mark.parametrize("field, index, value", [
+    ("q", 900, np.nan), ("q", 5, np.inf), ("omega", 300, np.nan), ("omega", 0, -np.inf),
+    ("mu", 1, np.nan), ("mu_d", 2, np.inf), ("t", 1, 0.0)])
+def test_inputs_the_kernel_refuses_give_the_references_result(field, index, value):
+    """NaN/inf or t[1] <= t[0]: the kernel refuses them, slip_displacement then returns the
+    reference's result bit for bit (NaN where the reference has NaN)."""
+    t = np.arange(2000) / 4500.0
+    case = dict(t=t, q=0.02 * np.sin(2 * np.pi * 40 * t) + 0.05 * t, omega=-60.0 - 200.0 * t,
+                mu=np.linspace(0.0, 0.04, 5), mu_d=0.7 * np.linspace(0.0, 0.04, 5),
+                direction=1, d_over_l=0.26, max_episodes=None)
+    case[field] = case[field].copy()
+    case[field][index] = value
+    if KERNEL is not None:
+        with pytest.raises(ValueError, match=f"'{field}'"):
+            KERNEL.slip(*[case[k] for k in ("t", "q", "omega", "mu", "mu_d")], 1.0, 0.26, -1,
+                        np.empty((5, t.size)), np.empty(5))
+    with np.errstate(invalid="ignore", over="ignore"):   # the reference's NaN warnings
+        d, on = call(S.slip_displacement, case)
+        d_ref, on_ref = call(S._slip_displacement_numpy, case)
+    np.testing.assert_array_equal(d, d_ref)
+    np.testing.assert_array_equal(on, on_ref)
+    if field in ("q", "omega") and np.isnan(value):
+        assert np.isnan(d).any()     # the case reaches the NaN (not a vacuous comparison)
 
 
 #: Relative agreement of the bounds of a real analysis. Not 1e-9: the analysis amplifies

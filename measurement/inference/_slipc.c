@@ -16,6 +16,9 @@
  * relative to the episode's onset sample (equal in exact arithmetic, fewer rounding errors),
  * so the two agree to rounding (tests/test_slip_kernel.py: <= 1e-9 of max|D|).
  *
+ * t is taken as uniform, as in the reference: the step is t[1] - t[0] (refused unless > 0);
+ * NaN/inf in any input is refused (ValueError), the caller then runs the reference.
+ *
  * A plain CPython extension: arrays arrive through the buffer protocol (C-contiguous float64,
  * checked here), so no NumPy headers are needed to build it.
  */
@@ -68,10 +71,22 @@ static int count_is(Py_buffer *b, Py_ssize_t n, const char *name)
     return 1;
 }
 
+/* Every value finite, or a ValueError naming the first one that is not. */
+static int all_finite(const double *v, Py_ssize_t n, const char *name)
+{
+    for (Py_ssize_t k = 0; k < n; k++)
+        if (!isfinite(v[k])) {
+            PyErr_Format(PyExc_ValueError, "_slipc: '%s' holds a non-finite value at index %zd",
+                         name, k);
+            return 0;
+        }
+    return 1;
+}
+
 static double clip50(double v) { return v < -50.0 ? -50.0 : (v > 50.0 ? 50.0 : v); }
 
 typedef struct {
-    const double *t, *q, *w, *w2, *cw; /* times, q, omega, omega^2, trapezoid integral of omega */
+    const double *t, *q, *w2, *cw;      /* times, q, omega^2, trapezoid integral of omega */
     Py_ssize_t n;
     double h, coef;                     /* step [s]; (2 - 0.2 d/l) s / 1.4 */
     Py_ssize_t cap;                     /* episodes followed (< 0: all) */
@@ -159,6 +174,21 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
     if (!count_is(&b[1], n, "q") || !count_is(&b[2], n, "omega")
         || !count_is(&b[4], m, "mu_d") || !count_is(&b[6], m, "onset"))
         goto done;
+    /* NaN/inf would not fail here but give rows that differ from the reference's (its
+     * cumulative sums carry a NaN into every later episode, this kernel restarts them) */
+    for (int i = 0; i < 5; i++)
+        if (!all_finite(b[i].buf, b[i].len / 8, names[i])) goto done;
+    if (!isfinite(direction) || !isfinite(d_over_l)) {
+        PyErr_SetString(PyExc_ValueError, "_slipc: 'direction' and 'd_over_l' must be finite");
+        goto done;
+    }
+    {
+        const double *t = b[0].buf;
+        if (!(t[1] - t[0] > 0.0 && isfinite(t[1] - t[0]))) {
+            PyErr_SetString(PyExc_ValueError, "_slipc: 't' must increase (t[1] > t[0])");
+            goto done;
+        }
+    }
     if (m > 0 && n > PY_SSIZE_T_MAX / 8 / m) {
         PyErr_SetString(PyExc_ValueError, "_slipc: 'D' too large");
         goto done;
@@ -169,7 +199,7 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
     {
         const double *t = b[0].buf, *w = b[2].buf, *mu = b[3].buf, *mud = b[4].buf;
         double *D = b[5].buf, *onset = b[6].buf;
-        Record r = {t, b[1].buf, w, work, work + n, n, t[1] - t[0],
+        Record r = {t, b[1].buf, work, work + n, n, t[1] - t[0],
                     (2.0 - 0.2 * d_over_l) * direction / 1.4, cap};
         Py_BEGIN_ALLOW_THREADS
         double *w2 = work, *cw = work + n;

@@ -54,10 +54,14 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
                 and mud_.size == mu_.size):
             disp, onset = np.empty((mu_.size, t_.size)), np.empty(mu_.size)
             cap = -1 if max_episodes is None else max(int(max_episodes), 0)
-            _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap, disp,
-                        onset)
-            return disp, onset
-    # no kernel, or shapes the kernel does not take: the reference (broadcasts or raises)
+            try:
+                _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap,
+                            disp, onset)
+                return disp, onset
+            except ValueError:  # NaN/inf or t[1] <= t[0]: refused before writing anything
+                pass
+    # no kernel, or inputs the kernel does not take: the reference (broadcasts, propagates
+    # NaN or raises)
     return _slip_displacement_numpy(t, q, omega, mu, mu_d, direction, d_over_l,
                                     max_episodes=max_episodes)
 
