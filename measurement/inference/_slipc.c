@@ -3,7 +3,8 @@
  *
  * Why compiled: the NumPy reference (_slip_displacement_numpy) makes ~20 passes over (M, N)
  * arrays and one exp per element, stuck columns included, and loops over slip episodes in
- * Python; a 3072-frame analysis spent ~0.10 s there. Here each row is walked once: a compare
+ * Python; a 3072-frame analysis spent 0.05-0.10 s of CPU there (benchmarks/bench_slip_model.py,
+ * seeds 1-3). Here each row is walked once: a compare
  * per stuck sample, one exp per slipping sample.
  *
  * The same model and discretisation as the reference: stuck until q > mu, a sub-sample onset

@@ -1,8 +1,8 @@
 """The ball's slip along the rim for candidate (mu, mu_d), driven by a measured ABU motion.
 
 Two implementations of one model and discretisation: a compiled kernel (``_slipc.c``, built
-by ``pip install -e .``), one candidate row at a time (~12x faster in an analysis:
-benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
+by ``pip install -e .``), one candidate row at a time (~10x less CPU time in an analysis,
+8.5-11x on seeds 1-3 of benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
 vectorised over candidates and time (integrating factor + cumulative sums; episodes of slip
 are looped, samples are not). They agree to rounding (the kernel takes the integrating factor
 from each episode's onset, the reference from the call's first column; <= 1e-13 of max |D|,
