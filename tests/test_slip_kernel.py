@@ -12,7 +12,9 @@ first sample), mu_d / mu from 0.3 to 1; direction +-1; max_episodes None, 0, 1 o
 """
 from __future__ import annotations
 
+import mmap
 import re
+import sys
 
 import numpy as np
 import pytest
@@ -206,6 +208,28 @@ def test_bad_buffers_are_refused(slot, value, error, words):
         KERNEL.slip(*args)
     if slot not in (8, 9):   # refused before anything is written
         assert (args[8] == 7.0).all() and (args[9] == 7.0).all()
+
+
+@needs_kernel
+def test_a_candidate_grid_whose_size_overflows_is_refused():
+    """M N doubles beyond the address range (M N 8 > the largest Py_ssize_t): refused before
+    any index is formed. The N-sample inputs are one read-only, never-touched mapping of
+    zero pages (8 TiB of address space, no memory)."""
+    m = 1 << 20
+    n = (sys.maxsize // 8) // m + 1
+    try:
+        zeros = mmap.mmap(-1, 8 * n, flags=mmap.MAP_PRIVATE, prot=mmap.PROT_READ)
+    except (OSError, OverflowError) as exc:    # an address-space limit (ulimit -v)
+        pytest.skip(f"cannot map {8 * n} bytes of address space: {exc}")
+    try:
+        big = np.frombuffer(zeros, dtype=np.float64)
+        assert big.size == n and m * n * 8 > sys.maxsize
+        with pytest.raises(ValueError, match="'D' too large"):
+            KERNEL.slip(big, big, big, np.zeros(m), np.zeros(m), 1.0, 0.26, -1, np.empty(1),
+                        np.empty(m))
+    finally:
+        del big
+        zeros.close()
 
 
 @needs_kernel

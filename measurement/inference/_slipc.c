@@ -175,6 +175,12 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
     if (!count_is(&b[1], n, "q") || !count_is(&b[2], n, "omega")
         || !count_is(&b[4], m, "mu_d") || !count_is(&b[6], m, "onset"))
         goto done;
+    /* sizes first: they are checked without reading the values */
+    if (m > 0 && n > PY_SSIZE_T_MAX / 8 / m) {
+        PyErr_SetString(PyExc_ValueError, "_slipc: 'D' too large");
+        goto done;
+    }
+    if (!count_is(&b[5], m * n, "D")) goto done;
     /* NaN/inf would not fail here but give rows that differ from the reference's (its
      * cumulative sums carry a NaN into every later episode, this kernel restarts them) */
     for (int i = 0; i < 5; i++)
@@ -190,11 +196,6 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
             goto done;
         }
     }
-    if (m > 0 && n > PY_SSIZE_T_MAX / 8 / m) {
-        PyErr_SetString(PyExc_ValueError, "_slipc: 'D' too large");
-        goto done;
-    }
-    if (!count_is(&b[5], m * n, "D")) goto done;
     work = malloc(sizeof(double) * 2 * (size_t)n);
     if (!work) { PyErr_NoMemory(); goto done; }
     {
