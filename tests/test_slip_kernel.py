@@ -241,9 +241,9 @@ def test_a_read_only_output_is_refused():
 
 
 @needs_kernel
-def test_odd_inputs_go_through_the_reference():
+def test_lists_and_strided_inputs_are_converted_and_bad_shapes_raise_as_the_reference():
     """Lists, integers, a non-contiguous q go through the kernel after conversion; a single
-    sample raises as the reference does."""
+    sample or a scalar mu raises as the reference does, with and without the kernel."""
     t = list(np.arange(40) / 4500.0)
     q = (0.03 * np.ones(80))[::2]
     d, on = S.slip_displacement(t, q, [60] * 40, [0.01, 0.02], [0.01, 0.015], 1, 0.26)
@@ -252,8 +252,11 @@ def test_odd_inputs_go_through_the_reference():
                                                1, 0.26)
     assert np.abs(d - d_ref).max() <= REL_TOL * np.abs(d_ref).max()
     np.testing.assert_array_equal(on, on_ref)
-    with pytest.raises(IndexError):
-        S.slip_displacement(np.zeros(1), np.zeros(1), np.ones(1), np.ones(1), np.ones(1), 1, 0.2)
+    for fn in (S.slip_displacement, S._slip_displacement_numpy):
+        with pytest.raises(IndexError):
+            fn(np.zeros(1), np.zeros(1), np.ones(1), np.ones(1), np.ones(1), 1, 0.2)
+        with pytest.raises(IndexError):
+            fn(np.asarray(t), q, np.full(40, 60.0), np.float64(0.01), np.array([0.01]), 1, 0.26)
 
 
 @pytest.mark.parametrize("field, index, value", [

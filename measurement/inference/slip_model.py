@@ -48,10 +48,13 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
         (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
     """
     if _slipc is not None:
-        args = [np.ascontiguousarray(a, dtype=float) for a in (t, q, omega, mu, mu_d)]
+        # asarray first: ascontiguousarray would make a scalar mu 1-d, which the reference
+        # refuses
+        args = [np.asarray(a, dtype=float) for a in (t, q, omega, mu, mu_d)]
         t_, q_, w_, mu_, mud_ = args
         if (all(a.ndim == 1 for a in args) and t_.size >= 2 and q_.size == w_.size == t_.size
                 and mud_.size == mu_.size):
+            t_, q_, w_, mu_, mud_ = (np.ascontiguousarray(a) for a in args)
             disp, onset = np.empty((mu_.size, t_.size)), np.empty(mu_.size)
             cap = -1 if max_episodes is None else max(int(max_episodes), 0)
             try:
