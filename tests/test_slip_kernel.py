@@ -284,6 +284,21 @@ def test_inputs_the_kernel_refuses_give_the_references_result(field, index, valu
         assert np.isnan(d).any()     # the case reaches the NaN (not a vacuous comparison)
 
 
+@pytest.mark.parametrize("cap, like", [(-1, 0), (-5, 0), (10 ** 30, None), (2 ** 63, None)])
+def test_caps_outside_the_kernels_range_mean_what_they_mean_to_the_reference(cap, like):
+    """A negative cap follows no episode (the kernel's own -1 means all), a cap beyond a C
+    integer every one (no OverflowError): as the reference does."""
+    case = {**random_case(3), "max_episodes": cap}
+    d, on = call(S.slip_displacement, case)
+    d_ref, on_ref = call(S._slip_displacement_numpy, case)
+    d_like, on_like = call(S.slip_displacement, case, max_episodes=like)
+    np.testing.assert_array_equal(d, d_like)
+    np.testing.assert_array_equal(on, on_like)
+    assert np.abs(d - d_ref).max(initial=0.0) <= REL_TOL * np.abs(d_ref).max(initial=0.0)
+    np.testing.assert_allclose(on, on_ref, rtol=0, atol=ONSET_TOL_S)
+    assert (d.any() and np.isfinite(on).any()) == (like is None)   # the case slips
+
+
 #: Relative agreement of the bounds of a real analysis. Not 1e-9: the analysis amplifies
 #: rounding-level changes of the model rows (rows agreeing to ~3e-15 of max|D|) up to ~1e8-fold,
 #: through the noise model's fit (sigma_white moved 1.6e-9 on seed 8). Measured on the harsh

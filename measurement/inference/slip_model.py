@@ -12,6 +12,8 @@ creep lower bound).
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 try:  # the compiled kernel, built by `pip install -e .` where a C compiler is found
@@ -56,7 +58,8 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
                 and mud_.size == mu_.size):
             t_, q_, w_, mu_, mud_ = (np.ascontiguousarray(a) for a in args)
             disp, onset = np.empty((mu_.size, t_.size)), np.empty(mu_.size)
-            cap = -1 if max_episodes is None else max(int(max_episodes), 0)
+            # the reference follows none for a cap <= 0 and any int (the kernel: < 0 is all)
+            cap = -1 if max_episodes is None else min(max(int(max_episodes), 0), sys.maxsize)
             try:
                 _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap,
                             disp, onset)
