@@ -233,6 +233,21 @@ def test_a_candidate_grid_whose_size_overflows_is_refused():
 
 
 @needs_kernel
+@pytest.mark.parametrize("out, src", [(8, 1), (8, 0), (9, 3), (9, 4), (9, 8)])
+def test_an_output_sharing_memory_with_an_input_is_refused(out, src):
+    """With one candidate, D (N values) could be q's or t's own buffer, onset mu's: the kernel
+    would write D while it still reads q and t. Refused, nothing written."""
+    names = {0: "t", 1: "q", 3: "mu", 4: "mu_d", 8: "D", 9: "onset"}
+    args = _args(m=1)                   # D holds N values, onset 1
+    args[out] = args[src].reshape(-1)[:args[out].size]
+    before = [np.array(a, copy=True) for a in args[:5]]
+    with pytest.raises(ValueError, match=f"'{names[out]}' overlaps '{names[src]}'"):
+        KERNEL.slip(*args)
+    for a, b in zip(args[:5], before):
+        np.testing.assert_array_equal(a, b)
+
+
+@needs_kernel
 def test_a_read_only_output_is_refused():
     args = _args()
     args[9].flags.writeable = False

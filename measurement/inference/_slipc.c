@@ -26,6 +26,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 /* One C-contiguous float64 buffer of ``count`` doubles, or a ValueError/TypeError. */
@@ -82,6 +83,14 @@ static int all_finite(const double *v, Py_ssize_t n, const char *name)
             return 0;
         }
     return 1;
+}
+
+/* Whether two buffers share a byte (an output written while an input is still read). */
+static int overlap(const Py_buffer *a, const Py_buffer *b)
+{
+    uintptr_t a0 = (uintptr_t)a->buf, b0 = (uintptr_t)b->buf;
+    return a->len > 0 && b->len > 0 && a0 < b0 + (uintptr_t)b->len
+           && b0 < a0 + (uintptr_t)a->len;
 }
 
 static double clip50(double v) { return v < -50.0 ? -50.0 : (v > 50.0 ? 50.0 : v); }
@@ -181,6 +190,13 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
         goto done;
     }
     if (!count_is(&b[5], m * n, "D")) goto done;
+    for (int o = 5; o < 7; o++)
+        for (int i = 0; i < o; i++)
+            if (overlap(&b[o], &b[i])) {
+                PyErr_Format(PyExc_ValueError, "_slipc: '%s' overlaps '%s'", names[o],
+                             names[i]);
+                goto done;
+            }
     /* NaN/inf would not fail here but give rows that differ from the reference's (its
      * cumulative sums carry a NaN into every later episode, this kernel restarts them) */
     for (int i = 0; i < 5; i++)
