@@ -316,14 +316,16 @@ def test_caps_outside_the_kernels_range_mean_what_they_mean_to_the_reference(cap
 
 #: Relative agreement of the bounds of a real analysis. Not 1e-9: the analysis amplifies
 #: rounding-level changes of the model rows (rows agreeing to ~3e-15 of max|D|) up to ~1e8-fold,
-#: through the noise model's fit (sigma_white moved 1.6e-9 on seed 8). Measured on the harsh
-#: family's tracks, seeds 0-19, 3072 frames: kernel vs NumPy up to 1.8e-7 (seed 8; 0 on 10
-#: seeds), and the NumPy reference against itself with q x (1 + 4 ulp) up to 1.8e-7 (seed 9).
+#: through the noise model's fit. Measured on the harsh family's tracks, seeds 0-19, 3072
+#: frames: when the kernel was added, kernel vs NumPy up to 1.8e-7 (seed 8; 0 on 10 seeds)
+#: and the NumPy reference against itself with q x (1 + 4 ulp) up to 1.8e-7 (seed 9); with
+#: the analysis of 1de9436, kernel vs NumPy up to 2.0e-8 (seed 18; 0 on 16 seeds, seed 8
+#: among them). The test prints the figures of its seeds.
 BOUNDS_REL_TOL = 1e-6
 
 
 @needs_kernel
-@pytest.mark.parametrize("seed", [1, 8])
+@pytest.mark.parametrize("seed", [1, 8, 18])   # 18: the bounds differ (2.0e-8), not 0
 def test_a_real_analysis_gives_the_same_bounds_with_and_without_the_kernel(seed, monkeypatch):
     from test_inference import scenario_tracks
     from measurement.pipeline import MarkerTracks, measure_tracks
@@ -334,8 +336,12 @@ def test_a_real_analysis_gives_the_same_bounds_with_and_without_the_kernel(seed,
     monkeypatch.setattr(S, "_slipc", None)
     slow = measure_tracks(tracks, l_m=ball.l, d_m=ball.d).summary
     assert fast["status"] == slow["status"]
+    rel = {}
     for key in ("mu_low", "mu_high"):
         assert (fast[key] is None) == (slow[key] is None), key
         if fast[key] is not None:
-            assert abs(fast[key] - slow[key]) <= BOUNDS_REL_TOL * abs(slow[key]), key
+            rel[key] = abs(fast[key] - slow[key]) / abs(slow[key])
+            assert rel[key] <= BOUNDS_REL_TOL, key
+    print(f"\nseed {seed}: bounds with the kernel vs NumPy differ by "
+          + ", ".join(f"{k} {v:.1e}" for k, v in rel.items()) + " (relative)")
     assert fast["mu_low"] is not None and fast["mu_high"] is not None
