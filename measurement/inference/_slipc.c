@@ -3,7 +3,8 @@
  *
  * Why compiled: the NumPy reference (_slip_displacement_numpy) makes ~20 passes over (M, N)
  * arrays and one exp per element, stuck columns included, and loops over slip episodes in
- * Python; a 3072-frame analysis spent ~0.10 s there. Here each row is walked once: a compare
+ * Python; a 3072-frame analysis spent 0.05-0.10 s of CPU there (benchmarks/bench_slip_model.py,
+ * seeds 1-3). Here each row is walked once: a compare
  * per stuck sample, one exp per slipping sample.
  *
  * The same model and discretisation as the reference: stuck until q > mu, a sub-sample onset
@@ -16,12 +17,16 @@
  * relative to the episode's onset sample (equal in exact arithmetic, fewer rounding errors),
  * so the two agree to rounding (tests/test_slip_kernel.py: <= 1e-9 of max|D|).
  *
+ * t is taken as uniform, as in the reference: the step is t[1] - t[0] (refused unless > 0);
+ * NaN/inf in any input is refused (ValueError), the caller then runs the reference.
+ *
  * A plain CPython extension: arrays arrive through the buffer protocol (C-contiguous float64,
  * checked here), so no NumPy headers are needed to build it.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 /* One C-contiguous float64 buffer of ``count`` doubles, or a ValueError/TypeError. */
@@ -68,10 +73,30 @@ static int count_is(Py_buffer *b, Py_ssize_t n, const char *name)
     return 1;
 }
 
+/* Every value finite, or a ValueError naming the first one that is not. */
+static int all_finite(const double *v, Py_ssize_t n, const char *name)
+{
+    for (Py_ssize_t k = 0; k < n; k++)
+        if (!isfinite(v[k])) {
+            PyErr_Format(PyExc_ValueError, "_slipc: '%s' holds a non-finite value at index %zd",
+                         name, k);
+            return 0;
+        }
+    return 1;
+}
+
+/* Whether two buffers share a byte (an output written while an input is still read). */
+static int overlap(const Py_buffer *a, const Py_buffer *b)
+{
+    uintptr_t a0 = (uintptr_t)a->buf, b0 = (uintptr_t)b->buf;
+    return a->len > 0 && b->len > 0 && a0 < b0 + (uintptr_t)b->len
+           && b0 < a0 + (uintptr_t)a->len;
+}
+
 static double clip50(double v) { return v < -50.0 ? -50.0 : (v > 50.0 ? 50.0 : v); }
 
 typedef struct {
-    const double *t, *q, *w, *w2, *cw; /* times, q, omega, omega^2, trapezoid integral of omega */
+    const double *t, *q, *w2, *cw;      /* times, q, omega^2, trapezoid integral of omega */
     Py_ssize_t n;
     double h, coef;                     /* step [s]; (2 - 0.2 d/l) s / 1.4 */
     Py_ssize_t cap;                     /* episodes followed (< 0: all) */
@@ -159,17 +184,40 @@ static PyObject *slip(PyObject *Py_UNUSED(self), PyObject *args)
     if (!count_is(&b[1], n, "q") || !count_is(&b[2], n, "omega")
         || !count_is(&b[4], m, "mu_d") || !count_is(&b[6], m, "onset"))
         goto done;
+    /* sizes first: they are checked without reading the values */
     if (m > 0 && n > PY_SSIZE_T_MAX / 8 / m) {
         PyErr_SetString(PyExc_ValueError, "_slipc: 'D' too large");
         goto done;
     }
     if (!count_is(&b[5], m * n, "D")) goto done;
+    for (int o = 5; o < 7; o++)
+        for (int i = 0; i < o; i++)
+            if (overlap(&b[o], &b[i])) {
+                PyErr_Format(PyExc_ValueError, "_slipc: '%s' overlaps '%s'", names[o],
+                             names[i]);
+                goto done;
+            }
+    /* NaN/inf would not fail here but give rows that differ from the reference's (its
+     * cumulative sums carry a NaN into every later episode, this kernel restarts them) */
+    for (int i = 0; i < 5; i++)
+        if (!all_finite(b[i].buf, b[i].len / 8, names[i])) goto done;
+    if (!isfinite(direction) || !isfinite(d_over_l)) {
+        PyErr_SetString(PyExc_ValueError, "_slipc: 'direction' and 'd_over_l' must be finite");
+        goto done;
+    }
+    {
+        const double *t = b[0].buf;
+        if (!(t[1] - t[0] > 0.0 && isfinite(t[1] - t[0]))) {
+            PyErr_SetString(PyExc_ValueError, "_slipc: 't' must increase (t[1] > t[0])");
+            goto done;
+        }
+    }
     work = malloc(sizeof(double) * 2 * (size_t)n);
     if (!work) { PyErr_NoMemory(); goto done; }
     {
         const double *t = b[0].buf, *w = b[2].buf, *mu = b[3].buf, *mud = b[4].buf;
         double *D = b[5].buf, *onset = b[6].buf;
-        Record r = {t, b[1].buf, w, work, work + n, n, t[1] - t[0],
+        Record r = {t, b[1].buf, work, work + n, n, t[1] - t[0],
                     (2.0 - 0.2 * d_over_l) * direction / 1.4, cap};
         Py_BEGIN_ALLOW_THREADS
         double *w2 = work, *cw = work + n;

@@ -1,8 +1,8 @@
 """The ball's slip along the rim for candidate (mu, mu_d), driven by a measured ABU motion.
 
 Two implementations of one model and discretisation: a compiled kernel (``_slipc.c``, built
-by ``pip install -e .``), one candidate row at a time (~12x faster in an analysis:
-benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
+by ``pip install -e .``), one candidate row at a time (~10x less CPU time in an analysis,
+8.5-11x on seeds 1-3 of benchmarks/bench_slip_model.py), and the NumPy reference used where the kernel is not built,
 vectorised over candidates and time (integrating factor + cumulative sums; episodes of slip
 are looped, samples are not). They agree to rounding (the kernel takes the integrating factor
 from each episode's onset, the reference from the call's first column; <= 1e-13 of max |D|,
@@ -11,6 +11,8 @@ confidence set) and :func:`measurement.inference.running_max.predicted_creep` (t
 creep lower bound).
 """
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
@@ -48,16 +50,24 @@ def slip_displacement(t: np.ndarray, q: np.ndarray, omega: np.ndarray, mu: np.nd
         (D, onset): (M, N) displacement [rad] (>= 0) and (M,) first onset time [s] (inf: none).
     """
     if _slipc is not None:
-        args = [np.ascontiguousarray(a, dtype=float) for a in (t, q, omega, mu, mu_d)]
+        # asarray first: ascontiguousarray would make a scalar mu 1-d, which the reference
+        # refuses
+        args = [np.asarray(a, dtype=float) for a in (t, q, omega, mu, mu_d)]
         t_, q_, w_, mu_, mud_ = args
         if (all(a.ndim == 1 for a in args) and t_.size >= 2 and q_.size == w_.size == t_.size
                 and mud_.size == mu_.size):
+            t_, q_, w_, mu_, mud_ = (np.ascontiguousarray(a) for a in args)
             disp, onset = np.empty((mu_.size, t_.size)), np.empty(mu_.size)
-            cap = -1 if max_episodes is None else max(int(max_episodes), 0)
-            _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap, disp,
-                        onset)
-            return disp, onset
-    # no kernel, or shapes the kernel does not take: the reference (broadcasts or raises)
+            # the reference follows none for a cap <= 0 and any int (the kernel: < 0 is all)
+            cap = -1 if max_episodes is None else min(max(int(max_episodes), 0), sys.maxsize)
+            try:
+                _slipc.slip(t_, q_, w_, mu_, mud_, float(direction), float(d_over_l), cap,
+                            disp, onset)
+                return disp, onset
+            except ValueError:  # NaN/inf or t[1] <= t[0]: refused before writing anything
+                pass
+    # no kernel, or inputs the kernel does not take: the reference (broadcasts, propagates
+    # NaN or raises)
     return _slip_displacement_numpy(t, q, omega, mu, mu_d, direction, d_over_l,
                                     max_episodes=max_episodes)
 
