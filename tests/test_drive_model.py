@@ -386,3 +386,33 @@ def test_unseen_miss_5078_holds_with_the_drive_model(tmp_path, capsys):
     assert model["estimator"]["model"] == "accepted"
     assert model["mu_low"] <= mu <= model["mu_high"]
     assert model["relative_width"] < 0.5
+
+
+def test_a_fit_whose_kinematics_are_not_finite_is_refused():
+    """``fit_model`` refuses a fit whose own omega_dot is not finite (an unstable trial loop
+    overflows), and NumPy's overflow warnings stay inside it. The model: theta fitted exactly
+    by a free speed, its omega_dot overflowing where the data end."""
+    import warnings
+    from types import SimpleNamespace
+
+    from measurement.kinematics.drive_model import DriveModelSettings, fit_model
+
+    t = np.arange(400) / 4500.0
+    rng = np.random.default_rng(3)
+    th = 30.0 * t + 0.5 * t**2 + 1e-4 * rng.standard_normal(t.size)
+
+    def evaluate(p, need_theta=True):
+        alpha = np.full(t.size, p[0])
+        alpha[-1] = np.exp(1e3) * p[0]            # overflows: inf
+        return 0.5 * p[0] * t**2, 30.0 + p[0] * t, alpha
+
+    model = SimpleNamespace(names=("a",), x0=(0.3,), lo=(-10.0,), hi=(10.0,), prior=(),
+                            evaluate=evaluate, t=t)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = fit_model(t, th, model, 1e-4, DriveModelSettings(check_white=False))
+    assert not fit.accepted and "not finite" in fit.why
+    # the same model without the overflow is accepted: the refusal is the overflow's
+    model.evaluate = lambda p, need_theta=True: (0.5 * p[0] * t**2, 30.0 + p[0] * t,
+                                                 np.full(t.size, p[0]))
+    assert fit_model(t, th, model, 1e-4, DriveModelSettings(check_white=False)).accepted
