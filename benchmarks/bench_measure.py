@@ -44,6 +44,8 @@ sys.path.insert(0, str(ROOT))
 STAGES = r'''
 import sys, time, tempfile
 T = time.process_time
+from abu.cli.figure_startup import install
+install()   # as the abu program does at its start (matplotlib's set() docstrings skipped)
 t0 = T()
 import numpy as np
 from measurement import pipeline

@@ -100,9 +100,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def console_main() -> None:
     """The ``abu`` program (``[project.scripts]``): :func:`main` on ``sys.argv``, then the
-    process ends without freeing its modules one by one (:mod:`abu.cli.process_exit`)."""
+    process ends without freeing its modules one by one (:mod:`abu.cli.process_exit`); its
+    figures are drawn without matplotlib's generated docstrings (:mod:`abu.cli.figure_startup`)."""
+    from abu.cli.figure_startup import install
     from abu.cli.process_exit import exit_process
 
+    install()
     exit_process(main())
 
 
