@@ -97,3 +97,23 @@ def test_abu_track_records_the_compression(tmp_path, twin_frames):
                      "--quiet"]) == 0
         info = json.loads((out / "tracking.json").read_text())
         assert info["compression"]["lossy"] is lossy, info["compression"]
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_integer_statistics_equal_numpys_float_ones(dtype):
+    """The histogram quantiles of 8/16-bit frames (the fast path) give NumPy's sorted-data
+    quantiles: the same statistics as the frames converted to float (NumPy's path)."""
+    rng = np.random.default_rng(7)
+    top = np.iinfo(dtype).max
+    for trial in range(40):
+        v = rng.integers(0, rng.integers(1, top + 1), rng.integers(1, 4000)).astype(dtype)
+        q = rng.random()
+        diffs = np.abs(np.diff(v.astype(np.int32)))
+        if diffs.size:
+            assert C._quantile(diffs, q) == pytest.approx(np.quantile(diffs, q), rel=1e-12)
+        scale = rng.uniform(0.5, 0.2 * top)
+        frames = rng.normal(top / 2, scale, (4, 40, 48)).clip(0, top).astype(dtype)
+        as_float = frames.astype(np.float64)
+        assert C.block_edge_ratio(frames) == pytest.approx(C.block_edge_ratio(as_float),
+                                                            rel=1e-6)
+        assert C.noise_dn(frames) == pytest.approx(C.noise_dn(as_float), rel=1e-6)

@@ -104,21 +104,47 @@ def _phase_ratio(diff: np.ndarray, axis: int) -> float:
     return float(phase[k] / rest) if rest > 0 else 1.0
 
 
+def _exact_ints(frames: np.ndarray) -> np.ndarray | None:
+    """8- or 16-bit integer frames as a signed type their differences fit exactly, else None."""
+    f = np.asarray(frames)
+    if f.dtype.kind not in "ui" or f.dtype.itemsize > 2:
+        return None
+    return f.astype(np.int16 if f.dtype.itemsize == 1 else np.int32)
+
+
+def _quantile(values: np.ndarray, q: float) -> float:
+    """``np.quantile(values, q)`` (linear interpolation between order statistics); for
+    non-negative integers from their histogram, O(n) where the partition of ~0.8 million
+    values costs ~8 ms a call (a third of :func:`detect`)."""
+    v = values.ravel()
+    if v.dtype.kind == "f" or v.size == 0:
+        return float(np.quantile(v, q))
+    rank = np.cumsum(np.bincount(v))             # rank[k]: how many values are <= k
+    pos = q * (v.size - 1)
+    lo = int(np.floor(pos))
+    a, b = np.searchsorted(rank, [lo, min(lo + 1, v.size - 1)], side="right")
+    return float(a + (b - a) * (pos - lo))
+
+
 def block_edge_ratio(frames: np.ndarray) -> float:
     """Block-boundary statistic of (n, H, W) frames [1]: 1 without 8x8 block coding."""
-    f = np.asarray(frames, np.float32)
+    f = _exact_ints(frames)
+    if f is None:
+        f = np.asarray(frames, np.float32)
     dx = np.abs(np.diff(f, axis=2))      # difference between columns c and c + 1
     dy = np.abs(np.diff(f, axis=1))
     # edges of the scene (markers, the CD's rim) are clipped: the statistic is the texture's
-    cap = max(float(np.percentile(dx, 90)), float(np.percentile(dy, 90)), 1.0)
+    cap = np.float32(max(_quantile(dx, 0.9), _quantile(dy, 0.9), 1.0))
     return max(_phase_ratio(np.minimum(dx, cap), 2), _phase_ratio(np.minimum(dy, cap), 1))
 
 
 def noise_dn(frames: np.ndarray) -> float:
     """Sensor noise [DN] from the median absolute second difference along rows."""
-    f = np.asarray(frames, np.float32)
-    d2 = f[:, :, 2:] - 2.0 * f[:, :, 1:-1] + f[:, :, :-2]
-    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
+    f = _exact_ints(frames)
+    if f is None:
+        f = np.asarray(frames, np.float32)
+    d2 = f[:, :, 2:] - 2 * f[:, :, 1:-1] + f[:, :, :-2]
+    return float(1.4826 * _quantile(np.abs(d2), 0.5) / np.sqrt(6.0))
 
 
 def frozen_block_share(frames: np.ndarray) -> float:
