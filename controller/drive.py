@@ -207,6 +207,25 @@ def _check_number(source: str, name: str, value: Any, low: float, strict: bool) 
     return float(value)
 
 
+def _given(obj: dict, name: str, default: Any) -> Any:
+    """``obj[name]``, or ``default`` when the field is absent or null."""
+    value = obj.get(name)
+    return default if value is None else value
+
+
+def _check_stable(source: str, zeta: float, omega_n: float, tau_motor: float) -> None:
+    """A PI loop with a torque lag is stable only below the Routh-Hurwitz limit of its
+    characteristic polynomial tau s^3 + s^2 + 2 zeta omega_n s + omega_n^2: tau < 2 zeta /
+    omega_n. A drive identified from a record was stable while recorded; beyond the limit
+    its speed oscillates ever more and every plan and kinematic model built on it is void."""
+    limit = 2.0 * zeta / omega_n
+    if tau_motor >= limit:
+        raise DriveFileError(source, f"a torque lag below 2 zeta / omega_n = {limit:.4g} s, got "
+                                     f"{tau_motor:g} s: with it the loop tau s^3 + s^2 + 2 zeta "
+                                     "omega_n s + omega_n^2 is unstable (Routh-Hurwitz), which "
+                                     "no drive identified from a record is", "tau_motor_s")
+
+
 def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
     """Validate a parsed drive.json object; raises :class:`DriveFileError` naming the field."""
     if not isinstance(obj, dict):
@@ -234,12 +253,15 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
     for name in ("zeta", "omega_n_rad_s"):
         if name not in obj:
             raise DriveFileError(source, "missing", name)
-    values = {name: obj.get(name, default) for name, default in
+    # an optional field given as null is absent (as sample_time_s always was)
+    values = {name: _given(obj, name, default) for name, default in
               (("zeta", None), ("omega_n_rad_s", None), ("tau_motor_s", 0.0),
                ("setpoint_weight", 1.0))}
     for name, value in values.items():
         _check_number(source, name, value, 0.0, strict=name != "tau_motor_s")
-    tau_f = _check_number(source, "setpoint_tau_s", obj.get("setpoint_tau_s", 0.0), 0.0,
+    _check_stable(source, float(values["zeta"]), float(values["omega_n_rad_s"]),
+                  float(values["tau_motor_s"]))
+    tau_f = _check_number(source, "setpoint_tau_s", _given(obj, "setpoint_tau_s", 0.0), 0.0,
                           strict=False)
     sample = obj.get("sample_time_s")
     if sample is not None:
@@ -266,8 +288,9 @@ def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, flo
                                and math.isfinite(v) for v in pair) or pair[0] > pair[1]):
                 raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
                                      key)
-            if name in PI_OPTIONAL and (pair[0] < 0.0 or pair[1] > UPPER[name]):
-                # the fit starts at its middle and puts its prior there: within the field's range
+            if pair[0] < 0.0 or pair[1] > UPPER[name]:
+                # a design takes its corners and the drive model its middle as a prior: within
+                # the field's own range
                 raise DriveFileError(source, f"expected 0 <= low <= high <= {UPPER[name]:g}, got "
                                              f"{pair!r}", key)
             ci95[name] = (float(pair[0]), float(pair[1]))
@@ -284,7 +307,8 @@ def _tracking_from_dict(obj: dict, source: str) -> Drive:
         raise DriveFileError(source, "missing (the tracking loop's bandwidth [rad/s])",
                              "bandwidth_rad_s")
     wb = _check_number(source, "bandwidth_rad_s", obj["bandwidth_rad_s"], 0.0, strict=True)
-    tau = _check_number(source, "tau_motor_s", obj.get("tau_motor_s", 0.0), 0.0, strict=False)
+    tau = _check_number(source, "tau_motor_s", _given(obj, "tau_motor_s", 0.0), 0.0,
+                        strict=False)
     ci95 = _intervals(obj, "tracking", source)
     fit = obj.get("fit") or {}
     return Drive(model="tracking", tau_motor=tau, bandwidth=wb, ci95=ci95,

@@ -272,3 +272,39 @@ def test_twin_tracks_identify_then_render_with_drive_measures_true_mu(tmp_path, 
           f"mu in [{s['mu_low']:.5g}, {s['mu_high']:.5g}] (true 0.03)")
     assert s["mu_low"] <= 0.03 <= s["mu_high"]
     assert s["drive"]["model"] == "pi-lag"
+
+
+def test_drive_json_refuses_an_unstable_loop_at_the_routh_hurwitz_limit():
+    """tau s^3 + s^2 + 2 zeta wn s + wn^2 has a root in the right half-plane from tau = 2 zeta /
+    wn on (checked here by its roots, an independent truth): such a drive.json is refused,
+    naming tau_motor_s; just below the limit it is read."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        zeta, wn = rng.uniform(0.2, 2.0), rng.uniform(2.0, 60.0)
+        limit = 2.0 * zeta / wn
+        if limit >= 1.0:       # beyond tau_motor_s's own range (<= 1 s)
+            continue
+        for factor, stable in ((0.97, True), (1.03, False)):
+            tau = factor * limit
+            roots = np.roots([tau, 1.0, 2.0 * zeta * wn, wn**2])
+            assert (roots.real.max() < 0) == stable
+            obj = Drive("pi-lag", 0.5, 10.0, 0.01).to_dict()
+            obj.update(zeta=zeta, omega_n_rad_s=wn, tau_motor_s=tau)
+            if stable:
+                assert drive_from_dict(obj, "d.json").tau_motor == tau
+            else:
+                with pytest.raises(DriveFileError, match=r"d\.json.*tau_motor_s.*unstable"):
+                    drive_from_dict(obj, "d.json")
+
+
+def test_drive_json_optional_nulls_are_absent_and_intervals_in_range():
+    good = Drive("pi-lag-weighted", 0.7, 12.0, 0.02, 0.8).to_dict()
+    for name, default in (("tau_motor_s", 0.0), ("setpoint_weight", 1.0),
+                          ("setpoint_tau_s", 0.0), ("sample_time_s", None)):
+        back = drive_from_dict({**good, name: None}, "x.json")
+        assert back.value(name) == default, name
+    for key, pair in (("zeta_ci95", [-0.1, 0.8]), ("omega_n_rad_s_ci95", [10.0, 2e4]),
+                      ("tau_motor_s_ci95", [0.0, 1.5]), ("setpoint_weight_ci95", [-1.0, 1.0])):
+        with pytest.raises(DriveFileError, match=key):
+            drive_from_dict({**good, key: pair}, "x.json")
+    assert drive_from_dict({**good, "zeta_ci95": [0.6, 0.8]}, "x.json").ci95["zeta"] == (0.6, 0.8)
