@@ -45,6 +45,11 @@ same torque lag (``tau_motor_s``, default 0)::
 
 ``zeta``, ``omega_n_rad_s`` and ``setpoint_weight`` are not fields of a tracking drive (refused
 by name), nor ``bandwidth_rad_s`` of the PI models.
+
+Checked on load, each refusal naming the file and the field: every number finite and within
+its field's range (:data:`UPPER`), every ``*_ci95`` a pair 0 <= low <= high <= that range's
+top; an optional field given as ``null`` is absent; a PI loop must be stable: tau_motor
+< 2 zeta / omega_n (Routh-Hurwitz on its characteristic polynomial above).
 """
 from __future__ import annotations
 
