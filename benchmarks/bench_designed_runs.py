@@ -250,19 +250,33 @@ def one(job: tuple) -> dict:
     return row
 
 
-def predicted(row: dict, design: dict, camera: bool = False) -> dict:
+def predicted(row: dict, design: dict, camera: bool = False, true_mu_d: bool = False) -> dict:
     """The width model's prediction for this run's design at its true mu; ``camera``: with
     the camera's noise known (this run's measured theta and beta noise, what an earlier
-    recording of the same set-up states: ``abu next`` reads it from the summaries)."""
+    recording of the same set-up states: ``abu next`` reads it from the summaries);
+    ``true_mu_d``: told the run's true mu_d / mu (its range collapsed onto it; a plan spans
+    0.6-1 around 0.8)."""
     from harness.planning.design_width import predict_run_width
-    from harness.planning.width_model import CALIBRATED, with_camera_noise
+    from harness.planning.width_model import CALIBRATED, MU_D_RATIOS, with_camera_noise
     c = CALIBRATED
+    k = row["mu_d"] / row["mu"]
+    ratios = (k, k, k) if true_mu_d else MU_D_RATIOS
     if camera:
         c = with_camera_noise(c, [{"noise": {"sigma_theta_rad": row["sigma_theta_rad"]},
                                    "model_fit": {"noise_model": {
                                        "sigma_white_rad": row["sigma_white_beta_rad"],
                                        "sigma_leftover_rad": row["sigma_leftover_rad"]}}}])
-    return predict_run_width(design, DRIVES[row["drive"]], row["mu"], constants=c)
+    return predict_run_width(design, DRIVES[row["drive"]], row["mu"], constants=c,
+                             mu_d_ratios=ratios)
+
+
+def _ratio_with_true_mu_d(rows: list[dict], camera: bool = False) -> np.ndarray:
+    """Measured / predicted width with the width model told each run's true mu_d / mu."""
+    out = []
+    for r in rows:
+        p = predicted(r, r["design"], camera=camera, true_mu_d=True)
+        out.append(r["relative_width"] / p["expected"] if p["expected"] else math.inf)
+    return np.array(out)
 
 
 def finite(r: dict) -> bool:
@@ -296,6 +310,13 @@ def report(rows: list[dict], label: str) -> None:
         print(f"  with the camera's noise known: median {np.median(ratio_cam):.3f}, 5-95 % "
               f"[{np.percentile(ratio_cam, 5):.3f}, {np.percentile(ratio_cam, 95):.3f}], "
               f"within [{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band_cam.mean():.1f} %")
+        for what, cam in (("", False), (" and the camera's noise", True)):
+            known = _ratio_with_true_mu_d(fin, camera=cam)
+            kband = (known >= RATIO_BAND[0]) & (known <= RATIO_BAND[1])
+            print(f"  with the true mu_d / mu{what} known (no plan knows mu_d: the ceiling of "
+                  f"one told it by earlier runs): median {np.median(known):.3f}, 5-95 % "
+                  f"[{np.percentile(known, 5):.3f}, {np.percentile(known, 95):.3f}], within "
+                  f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * kband.mean():.1f} %")
         print(f"  median measured width {100 * np.median(w):.1f} % (report's run 8.7 %), "
               f"predicted median {100 * np.median([r['pred']['expected'] for r in fin]):.1f} %")
         parts = np.array([[(r["profile_mu_high"] - r["profile_mu_low"]) / r["mu"],

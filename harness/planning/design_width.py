@@ -12,8 +12,8 @@ from controller.drive import Drive
 from controller.reference import Staircase
 
 from harness.planning.loop_response import as_setpoints, drive_response
-from harness.planning.width_model import CALIBRATED, WidthConstants, WidthPrediction, \
-    predict_widths
+from harness.planning.width_model import CALIBRATED, MU_D_RATIOS, WidthConstants, \
+    WidthPrediction, predict_widths
 
 HZ = 2.0 * math.pi
 
@@ -61,12 +61,16 @@ def summary(pred: WidthPrediction, objective: str) -> dict[str, Any]:
 
 
 def predict_run_width(design: dict[str, Any], drive: Drive, mu: float, lever: float | None = None,
-                      constants: WidthConstants = CALIBRATED) -> dict[str, float | None]:
-    """The prediction at one true mu for a design.json object (``abu design --json``)."""
+                      constants: WidthConstants = CALIBRATED,
+                      mu_d_ratios: tuple[float, float, float] = MU_D_RATIOS
+                      ) -> dict[str, float | None]:
+    """The prediction at one true mu for a design.json object (``abu design --json``);
+    ``mu_d_ratios``: as :func:`predict_widths`."""
     from abu_model.params import BallParams
 
     stair = Staircase(design["omega0_hz"] * HZ, design["omega_end_hz"] * HZ, design["t0_s"],
                       design["te_s"], design["step_hz"] * HZ, design["rounding"])
     t, th, w, a = staircase_motion(drive, stair, design["fps_hz"], design["frames"])
     lev = BallParams().lever_ratio if lever is None else lever
-    return predict_widths(t, th, w, a, np.array([mu]), lev, constants).row(0)
+    return predict_widths(t, th, w, a, np.array([mu]), lev, constants,
+                          mu_d_ratios).row(0)

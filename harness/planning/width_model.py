@@ -196,7 +196,8 @@ def _deviation(q: np.ndarray, w2: np.ndarray, wa: np.ndarray, h: float, lever: f
 
 def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
                    mus: np.ndarray | float, lever: float,
-                   constants: WidthConstants = CALIBRATED) -> WidthPrediction:
+                   constants: WidthConstants = CALIBRATED,
+                   mu_d_ratios: tuple[float, float, float] = MU_D_RATIOS) -> WidthPrediction:
     """The relative width ``abu measure`` will report at each true mu (see the module doc).
 
     Args:
@@ -205,6 +206,9 @@ def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_do
             rad/s^2] at ``t`` (sign as planned; mu_req uses |omega_dot|).
         mus: true mu values [-].
         lever: (l - d/5) / l of the ball [-].
+        mu_d_ratios: mu_d / mu at the range's low end, its expected value and its high end
+            (a plan does not know mu_d: :data:`MU_D_RATIOS`; the benchmarks pass the true one
+            to show what knowing it would buy).
     """
     c = constants
     t = np.asarray(t, float)
@@ -225,7 +229,7 @@ def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_do
     ok = (i_s >= half) & (i_s < t.size - half)
     i_sc = np.minimum(i_s, t.size - 1)
     # upper bound: the truth's deviation reaches the threshold at i_hi, for each mu_d / mu
-    ratios = np.asarray(MU_D_RATIOS)
+    ratios = np.asarray(mu_d_ratios, float)
     lanes_s = np.repeat(i_sc, ratios.size)
     dev = _deviation(q_true, w2, wa, h, lever, lanes_s, np.outer(mus, ratios).ravel(), steps)
     reach = np.argmax(dev >= thr, axis=1)
