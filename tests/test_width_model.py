@@ -81,6 +81,13 @@ def test_prediction_on_a_polynomial_motion_has_its_closed_form_parts():
     upper = mu + dqdt * tau_hi
     low_bound = (upper - mu) / (0.5 * (upper + mu))
     assert low_bound < p.profile[0] < 4 * low_bound
+    # told mu_d / mu, the expected width is the one at that ratio: a slip with mu_d = mu
+    # emerges as tau^3, later than one with mu_d = 0.6 mu (tau^2), so its width is larger
+    at = {k: wm.predict_widths(t, theta, omega, alpha, np.array([mu]), LEVER, c,
+                               mu_d_ratios=(k, k, k)) for k in (0.6, 0.8, 1.0)}
+    assert at[0.8].expected[0] == pytest.approx(p.expected[0], rel=1e-12)
+    assert at[0.6].expected[0] < at[0.8].expected[0] < at[1.0].expected[0]
+    assert at[1.0].high90[0] == pytest.approx(p.high90[0], rel=1e-12)
 
 
 def test_design_and_next_outputs_carry_the_predicted_width(tmp_path, capsys):
