@@ -495,11 +495,7 @@ def main() -> None:
                 r["pred_camera"] = predicted(r, r["design"], camera=True)
         print(f"rows of {a.report}: seeds {min(r['seed'] for r in rows)}.."
               f"{max(r['seed'] for r in rows)}")
-        for dname in DRIVES:
-            report([r for r in rows if r["drive"] == dname], f"drive {dname}")
-            report_second([r for r in rows if r["drive"] == dname], f"drive {dname}")
-        report(rows, "all runs")
-        report_second(rows, "all runs")
+        report_slices(rows)
         return
     cfg = configs()
     designs = {c: run_design(*c, a.design_args.split()) for c in cfg}
@@ -529,9 +525,16 @@ def main() -> None:
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in RANGES)} x drives "
           f"{', '.join(DRIVES)}), true mu log-uniform in each range, mu_d/mu in {MU_D_RATIO}, "
           "lighting and lens of twin.scenario.random_scenario(seed)")
+    report_slices(rows)
+
+
+def report_slices(rows: list[dict]) -> None:
+    """The figures per drive, per prior range, and of all runs."""
     for dname in DRIVES:
         report([r for r in rows if r["drive"] == dname], f"drive {dname}")
         report_second([r for r in rows if r["drive"] == dname], f"drive {dname}")
+    for lo, hi in RANGES:
+        report([r for r in rows if tuple(r["mu_range"]) == (lo, hi)], f"range [{lo:g}, {hi:g}]")
     report(rows, "all runs")
     report_second(rows, "all runs")
 
