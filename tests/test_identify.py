@@ -20,7 +20,7 @@ from controller.drive import Drive, DriveFileError, drive_from_dict, dumps_drive
 from controller.pi import PISpeedController
 from controller.reference import Staircase
 from abu.cli.main import main
-from harness.planning.identify import fit_drive
+from harness.planning.identify import IdentifyError, fit_drive
 from harness.planning.loop_response import Setpoints, as_setpoints, loop_tf, response
 from harness.planning.record_io import Record
 
@@ -308,3 +308,15 @@ def test_drive_json_optional_nulls_are_absent_and_intervals_in_range():
         with pytest.raises(DriveFileError, match=key):
             drive_from_dict({**good, key: pair}, "x.json")
     assert drive_from_dict({**good, "zeta_ci95": [0.6, 0.8]}, "x.json").ci95["zeta"] == (0.6, 0.8)
+
+
+def test_identify_refuses_a_fitted_unstable_loop():
+    """A record of a loop beyond the Routh-Hurwitz limit (simulated: its oscillation grows
+    slowly enough to last the record) is fitted as such; identify refuses it, as drive.json
+    would, instead of writing a drive nothing can read."""
+    rng = np.random.default_rng(1)
+    rec, sp = camera_record((0.5, 20.0, 0.048), rng)           # limit 0.05 s: stable
+    assert fit_drive(rec, sp, "pi-lag").drive.tau_motor == pytest.approx(0.048, rel=0.02)
+    rec, sp = camera_record((0.5, 20.0, 0.055), rng)
+    with pytest.raises(IdentifyError, match="unstable.*tau_motor"):
+        fit_drive(rec, sp, "pi-lag")
