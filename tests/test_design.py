@@ -111,6 +111,29 @@ def test_design_holds_at_the_corners_of_the_drive_intervals(fmu_dir):
         assert all(r["first_step_stuck"] and r["slip_inside"] and r["brackets"] for r in rows)
 
 
+def test_unstable_corners_of_the_drive_intervals_are_not_held_to():
+    """A drive whose interval box reaches beyond the Routh-Hurwitz limit (tau_motor >= 2 zeta
+    / omega_n; checked by the loop polynomial's roots): those corners are dropped, the stable
+    ones kept, and the design's corner claim is about those."""
+    from harness.planning.design import drive_corners
+
+    ci = {"zeta": (0.4, 0.6), "omega_n_rad_s": (18.0, 22.0), "tau_motor_s": (0.035, 0.045)}
+    drive = Drive("pi-lag", 0.5, 20.0, 0.04, ci95=ci)
+    corners = drive_corners(drive)
+
+    def stable(d):
+        roots = np.roots([d.tau_motor, 1.0, 2 * d.zeta * d.omega_n, d.omega_n**2])
+        return roots.real.max() < 0
+
+    every = [(z, w, t) for z in ci["zeta"] for w in ci["omega_n_rad_s"]
+             for t in ci["tau_motor_s"]]
+    expected = {c for c in every if stable(Drive("pi-lag", *c))}
+    assert 0 < len(expected) < 8
+    assert {(c.zeta, c.omega_n, c.tau_motor) for c in corners} == expected
+    design = design_staircase(DesignSpec(0.02, 0.04, drive=drive))
+    assert design.ci_corners_hold is not None
+
+
 def test_render_args_render_the_designed_staircase():
     """``render_args`` carry the rounding and the step: ``abu render`` given them films the
     designed staircase, not the report's lead rounding at 1 Hz."""
