@@ -24,6 +24,8 @@ width model); the validation slice, seeds 1000-1071 with the designs of the pred
 was not used for it. Run (two worker processes, about 30 min on the shared 2-core machine)::
 
     nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --jobs 2
+    nice python benchmarks/bench_designed_runs.py --runs 180 --first 1000   # 60 per range,
+                                                                  # ~9 min on one core
     nice python benchmarks/bench_designed_runs.py --runs 72 --first 0 --jobs 2 --rows cal.jsonl \
         --design-args="--objective expected"      # the calibration slice's designs
     python benchmarks/bench_designed_runs.py --calibrate cal.jsonl   # fit the constants
