@@ -108,3 +108,13 @@ def measured_pixels(rec: Record, *, sigma_px: float = 0.03, harmonic_px: float =
     x = x + sigma_px * rng.standard_normal(x.shape)
     y = y + sigma_px * rng.standard_normal(y.shape)
     return x, y
+
+
+def write_tracks_csv(path, rec: Record, x: np.ndarray, y: np.ndarray):
+    """``rec``'s times with pixel tracks ``x``, ``y`` (N, 3) as the tracks CSV ``abu measure
+    --tracks`` reads (6 decimals); returns ``path``."""
+    rows = ["time,x_center,y_center,x_cd,y_cd,x_ball,y_ball"] + [
+        ",".join(f"{v:.6f}" for v in (t, *np.ravel(np.c_[xi, yi])))
+        for t, xi, yi in zip(rec.time, x, y)]
+    path.write_text("\n".join(rows) + "\n")
+    return path

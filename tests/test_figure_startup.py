@@ -10,7 +10,6 @@ import sys
 import types
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import abu.cli.figure_startup as fs
@@ -42,16 +41,11 @@ print(json.dumps({"status": status, "doc": len(lines.Line2D.set.__doc__ or ""),
 
 @pytest.fixture(scope="module")
 def tracks_csv(tmp_path_factory) -> Path:
-    from synthetic_tracks import measured_pixels, simulate
+    from synthetic_tracks import measured_pixels, simulate, write_tracks_csv
 
     record = simulate(0.02, "steps", n=1500)
     x, y = measured_pixels(record, sigma_px=0.02, harmonic_px=0.4, seed=5)
-    path = tmp_path_factory.mktemp("tracks") / "tracks.csv"
-    rows = ["time,x_center,y_center,x_cd,y_cd,x_ball,y_ball"] + [
-        ",".join(f"{v:.6f}" for v in (t, *np.ravel(np.c_[xi, yi])))
-        for t, xi, yi in zip(record.time, x, y)]
-    path.write_text("\n".join(rows) + "\n")
-    return path
+    return write_tracks_csv(tmp_path_factory.mktemp("tracks") / "tracks.csv", record, x, y)
 
 
 def _measure(mode: str, tracks: Path, out: Path) -> dict:

@@ -37,16 +37,11 @@ def _make_figures_module():
 
 @pytest.fixture(scope="module")
 def tracks_csv(tmp_path_factory):
-    from synthetic_tracks import measured_pixels, simulate
+    from synthetic_tracks import measured_pixels, simulate, write_tracks_csv
 
     record = simulate(0.02, "steps", n=1500)
     x, y = measured_pixels(record, sigma_px=0.02, harmonic_px=0.4, seed=11)
-    path = tmp_path_factory.mktemp("tracks") / "tracks.csv"
-    lines = ["time,x_center,y_center,x_cd,y_cd,x_ball,y_ball"] + [
-        ",".join(f"{v:.6f}" for v in (t, *np.ravel(np.c_[xi, yi])))
-        for t, xi, yi in zip(record.time, x, y)]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_tracks_csv(tmp_path_factory.mktemp("tracks") / "tracks.csv", record, x, y)
 
 
 def _capture(monkeypatch) -> dict:
