@@ -209,6 +209,11 @@ def _drive_cases(c: Corpus) -> None:
             drive(_json_text(DRIVE, key, v))
     for v in ([1.0], [2.0, 1.0], [0.5, "x"], [0.5, True], "0.5,0.9", [0.5, math.inf]):
         drive(json.dumps({**DRIVE, "zeta_ci95": v}, allow_nan=True))
+    # impossible physics: a loop beyond the Routh-Hurwitz limit (2 zeta / omega_n = 0.117 s),
+    # intervals outside their field's range
+    drive(json.dumps({**DRIVE, "tau_motor_s": 0.2}))
+    drive(json.dumps({**DRIVE, "tau_motor_s_ci95": [-0.01, 0.03]}))
+    drive(json.dumps({**DRIVE, "omega_n_rad_s_ci95": [10.0, 2.0e4]}))
     drive(json.dumps(DRIVE)[:-1] + ', "zeta": 5.0}')
     drive(json.dumps(DRIVE)[:40])
     drive(json.dumps([DRIVE]))
