@@ -170,8 +170,11 @@ def report(rows: list[dict], label: str, worst: int = 5) -> None:
         old = {key: np.array([x[key] for x in old]) for key in now[0]}
         cur = np.array([rel(*s["current"]) for _, s in st])
         print(f"    combined width, current rule: {_figures(m, p)}")
-        print(f"    the former rule: {_figures(m, old)}; at the true mu:"
-              f" median ratio {np.median(m / np.array([s['at_mu'] for _, s in st])):.3f}")
+        at_mu = m / np.array([s["at_mu"] for _, s in st])
+        print(f"    the former rule: {_figures(m, old)}; at the true mu (the next interval "
+              f"centred on it, what no plan knows): median ratio {np.median(at_mu):.3f}, "
+              f"within [{RATIO_BAND[0]}, {RATIO_BAND[1]}] "
+              f"{100 * np.mean((at_mu >= RATIO_BAND[0]) & (at_mu <= RATIO_BAND[1])):.1f} %")
         own = np.array([r["runs"][k + 1]["relative_width"] / np.interp(
             math.log(r["mu"]), np.log(np.array(s["table"], float)[:, 0]),
             np.array(s["table"], float)[:, 1]) for r, s in st])
