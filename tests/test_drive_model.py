@@ -321,6 +321,10 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
     assert "setpoint_tau_s" not in plain and "sample_time_s" not in plain
     assert (drive_from_dict(plain).setpoint_tau, drive_from_dict(plain).sample_time) == (0.0, None)
     good = d.to_dict()
+    # null is absent, for every optional field alike (no filter, a continuous controller)
+    nulls = drive_from_dict({**good, "setpoint_tau_s": None, "sample_time_s": None}, "x.json")
+    assert (nulls.setpoint_tau, nulls.sample_time) == (0.0, None)
+    assert nulls.has_setpoint_filter      # its interval alone still declares the filter
     for change, name in [({"setpoint_tau_s": -0.01}, "setpoint_tau_s"),
                          ({"setpoint_tau_s": True}, "setpoint_tau_s"),
                          ({"setpoint_tau_s": 5.0}, "setpoint_tau_s"),
@@ -328,7 +332,6 @@ def test_drive_file_filter_and_sample_time_fields(tmp_path):
                          ({"sample_time_s": "1 ms"}, "sample_time_s"),
                          ({"setpoint_tau_s": float("nan")}, "setpoint_tau_s"),
                          ({"setpoint_tau_s": float("inf")}, "setpoint_tau_s"),
-                         ({"setpoint_tau_s": None}, "setpoint_tau_s"),
                          ({"sample_time_s": -1e-3}, "sample_time_s"),
                          ({"sample_time_s": float("nan")}, "sample_time_s"),
                          ({"sample_time_s": 1e300}, "sample_time_s"),
