@@ -28,21 +28,46 @@ the same tracks are analysed several ways:
   (knots every ms): the same motion, omega = omega_cmd / (tau s + 1). Where the fit is refused
   the default kinematics stand (counted, with the reasons); the lens prior is the default.
 
+With ``--camera [--views N]`` each recording's lens is also calibrated as ``bench_coverage.py
+--camera`` does (``lens_calibration.calibrate``: chessboard views through the scenario's own
+optics, ``abu calibrate-camera``) and the same tracks are analysed as ``abu measure --camera``
+does (``measure_tracks``: positions undistorted, theta's harmonic prior from the calibration):
+
+* ``default + camera``: the default analysis; ``known drive + camera``: the ``known drive``
+  options; ``exact + camera``: the exact kinematics with the calibration's lens prior.
+
 Printed per analysis: coverage of the stated 95 %, intervals missing mu by more than 2 % of mu
 (and the worst), median and 90th percentile relative width, the share of recordings at or
 below 5 %. Then per drive kind: the default, ``known drive`` and both exact rows with the ratio
 of their median width to the exact one on the same recordings, and the model's refusals.
+With ``--camera``: the same per drive kind for the camera rows beside the others, each with its
+ratio to ``exact, no lens prior`` (issue 18's reference with a camera) and to ``exact
+kinematics``, and the calibration's figures. ``--out`` keeps the per-recording rows (JSON
+lines), ``--report`` prints their tables again.
 
 Measured (seeds 0..99 + 10 two-spot): median width default 34.6 %, exact kinematics 18.7 %,
 ``known drive`` 19.4 % (1.01x exact; staircase 1.08x, profile 0.94x: the profile model fits
 theta's harmonics and drops the lens prior the exact row keeps), coverage 100 %, no miss > 2 %;
 the loop model refused on 9 of 69 staircase recordings (``bench_drive_refusals.py``: the
 tracker's error is correlated over a few frames there, the model itself is right).
+With ``--camera`` (same 110 recordings; calibrated lens prior median 2.8e-4 rad against the
+family's 8e-4): ``default + camera`` 30.9 % = 2.36x ``exact, no lens prior`` (12.6 %),
+``known drive + camera`` 16.1 % = 1.25x (staircase 1.23x, profile 1.18x), ``exact +
+camera`` 14.6 % = 1.16x; coverage 100 %, no miss > 2 % for the first two. Median over the
+recordings of the ratio of widths: default over exact with the same camera 2.02x (the local
+kinematics' noise and truncation at the slip), the calibrated lens prior 1.12x; ``known drive
++ camera`` over ``exact, no lens prior`` 1.29x (staircase 1.58x, profile 1.13x: the ratio of
+medians meets 1.3x, the typical staircase recording does not).
 
 Run (two worker processes, ~10 minutes for 220 recordings on the 2-core machine; one process,
 ~11 minutes for 110 with the ``known drive`` row, 4-6 s CPU a recording; shared machine)::
 
     nice python benchmarks/bench_width_floor.py --n 200 --two-spot 20 --jobs 2
+    nice python benchmarks/bench_width_floor.py --n 100 --two-spot 10 --camera --out rows.jsonl
+    python benchmarks/bench_width_floor.py --report rows.jsonl  # the tables again
+
+(``--camera``: 9.3 s CPU a recording, 1.7 s of it the calibration; 110 recordings in 18
+minutes on one core of the shared machine.)
 """
 from __future__ import annotations
 
@@ -234,6 +259,14 @@ def width_ratio(rows: list[dict], name: str, ref: str) -> float:
     return float(np.median(w[both]) / np.median(e[both])) if both.any() else np.nan
 
 
+def per_recording_ratio(rows: list[dict], name: str, ref: str) -> float:
+    """Median over the recordings of the width of ``name`` over that of ``ref`` (where both are
+    finite): how much wider one analysis makes a recording, recording by recording."""
+    w, e = np.array(scores(rows, name)[2]), np.array(scores(rows, ref)[2])
+    both = np.isfinite(w) & np.isfinite(e)
+    return float(np.median(w[both] / e[both])) if both.any() else np.nan
+
+
 def names(rows: list[dict]) -> list[str]:
     """The analyses of the run: the camera rows where ``--camera`` added them."""
     return [*ANALYSES, KNOWN] + [n for n in CAMERA_ROWS if n in rows[0]["bounds"]]
@@ -292,6 +325,17 @@ def report_camera(rows: list[dict]) -> None:
     print("with a calibrated camera (width ratios to the exact rows on the same recordings):")
     by_kind(rows, ["42 ms (default)", "default + camera", KNOWN, "known drive + camera",
                    "exact + camera", EXACT, NO_LENS], [NO_LENS, EXACT])
+    print("  where the width goes, median over the recordings of the ratio of widths:")
+    for kind in ("all", "staircase_pi", "profile"):
+        sub = [r for r in rows if kind in ("all", r["kind"])]
+        if sub:
+            ratio = {n: per_recording_ratio(sub, n, ref) for n, ref in (
+                ("default + camera", "exact + camera"), ("exact + camera", NO_LENS),
+                ("known drive + camera", NO_LENS))}
+            print(f"    {kind}: kinematics (default+cam / exact+cam) "
+                  f"{ratio['default + camera']:.2f}, lens prior (exact+cam / no lens) "
+                  f"{ratio['exact + camera']:.2f}, known drive+cam / no lens "
+                  f"{ratio['known drive + camera']:.2f}")
     cal = [r["cal"] for r in rows]
     prior = np.array([r["lens_prior_rad"] for r in rows])
     print(f"  calibration: median |k1 error| {np.median([abs(c['cal_k1_err']) for c in cal]):.1e},"
@@ -299,6 +343,14 @@ def report_camera(rows: list[dict]) -> None:
           f"{np.mean([c['cal_s'] for c in cal]):.2f} s a recording; lens prior on theta's "
           f"harmonic median {np.median(prior):.1e} rad (90th pct {np.percentile(prior, 90):.1e}; "
           f"without camera {ANALYSES[EXACT][0].inference.theta_harmonic_rad:.0e})")
+
+
+def print_tables(rows: list[dict]) -> None:
+    """Every table of the run (the ``--camera`` one where its rows are there)."""
+    report(rows)
+    report_by_kind(rows)
+    if "cal" in rows[0]:
+        report_camera(rows)
 
 
 def main() -> None:
@@ -314,7 +366,14 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=DEFAULT_VIEWS,
                     help=f"calibration views with --camera (default {DEFAULT_VIEWS})")
     ap.add_argument("--out", default=None, help="write the per-recording rows here (JSON lines)")
+    ap.add_argument("--report", default=None,
+                    help="print the tables of rows written by --out (nothing is run)")
     a = ap.parse_args()
+    if a.report:
+        rows = [json.loads(line) for line in open(a.report)]
+        print(f"rows of {a.report}: {len(rows)} recordings")
+        print_tables(rows)
+        return
     views = a.views if a.camera else 0
     jobs = [(s, None, views) for s in range(a.first, a.first + a.n)]
     jobs += [(s, "two_spot", views) for s in range(a.first + a.n, a.first + a.n + a.two_spot)]
@@ -331,10 +390,7 @@ def main() -> None:
     print(f"harsh twin, rendered: seeds {a.first}..{a.first + a.n - 1} + {a.two_spot} forced "
           f"two-spot; {len(rows)} tracked ({len(failed)} refused by the tracker: {failed}); "
           "reported set at the stated 95 %")
-    report(rows)
-    report_by_kind(rows)
-    if a.camera:
-        report_camera(rows)
+    print_tables(rows)
     cpu = sum(getattr(resource.getrusage(who), f) for who in
               (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN) for f in ("ru_utime", "ru_stime"))
     print(f"{len(jobs)} recordings: {time.perf_counter() - t0:.0f} s wall, "

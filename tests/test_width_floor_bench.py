@@ -37,6 +37,8 @@ def test_width_ratio_uses_the_recordings_where_both_are_finite(bench):
     assert bench.width_ratio(ROWS, "a", "ref") == pytest.approx(2.0)
     assert bench.width_ratio(ROWS, "ref", "a") == pytest.approx(0.5)
     assert bench.width_ratio(ROWS[2:], "a", "ref") != bench.width_ratio(ROWS[2:], "a", "ref")
+    # recording by recording: 0.4 / 0.1 = 4 and 0.2 / 0.2 = 1, median 2.5
+    assert bench.per_recording_ratio(ROWS, "a", "ref") == pytest.approx(2.5)
     inside, misses, widths = bench.scores(ROWS, "a")
     assert inside == [True, True, False]
     assert misses[2] == pytest.approx(0.05) and misses[:2] == [0.0, 0.0]
