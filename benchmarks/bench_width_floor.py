@@ -57,7 +57,12 @@ camera`` 14.6 % = 1.16x; coverage 100 %, no miss > 2 % for the first two. Median
 recordings of the ratio of widths: default over exact with the same camera 2.02x (the local
 kinematics' noise and truncation at the slip), the calibrated lens prior 1.12x; ``known drive
 + camera`` over ``exact, no lens prior`` 1.29x (staircase 1.58x, profile 1.13x: the ratio of
-medians meets 1.3x, the typical staircase recording does not).
+medians meets 1.3x, the typical staircase recording does not). Unseen seeds, ``--camera``:
+``--first 7000 --n 45 --two-spot 5`` (49 tracked): default + camera 30.5 % = 2.38x, known drive
++ camera 18.4 % = 1.41x (staircase 1.45x, profile 1.20x), exact + camera 1.17x;
+``--first 8000 --n 90 --two-spot 10`` (100 tracked): default + camera 31.2 % = 2.47x, known
+drive + camera 16.2 % = 1.29x (staircase 1.52x, profile 1.13x), exact + camera 1.24x; per
+recording the kinematics 2.05x and 1.99x, the calibrated lens prior 1.16x and 1.13x.
 
 Run (two worker processes, ~10 minutes for 220 recordings on the 2-core machine; one process,
 ~11 minutes for 110 with the ``known drive`` row, 4-6 s CPU a recording; shared machine)::
