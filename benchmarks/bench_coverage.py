@@ -55,7 +55,8 @@ import numpy as np  # noqa: E402
 from abu.cli.main import main as abu_main  # noqa: E402
 from measurement.kinematics import estimators as kin_mod  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions  # noqa: E402
-from twin.calibration_target import DEFAULT_VIEWS, render_views  # noqa: E402
+from twin.calibration_target import DEFAULT_VIEWS  # noqa: E402
+from lens_calibration import calibrate  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
@@ -67,28 +68,6 @@ EXTRA_MEASURE_ARGS: list[str] = []
 ANALYSIS_ARGS: list[str] = []
 #: theta's harmonic prior without a camera file (the family prior).
 THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
-
-
-def calibrate(scn, work: Path, views: int) -> tuple[Path, dict]:
-    """Render the scenario's calibration views (same optics), run ``abu calibrate-camera``."""
-    t0 = time.perf_counter()
-    frames, _, _ = render_views(scn.optics, scn.width, scn.height, views, scn.seed)
-    stack = work / f"cal{scn.seed}.npy"
-    np.save(stack, frames)
-    cam = work / f"cam{scn.seed}.json"
-    err = io.StringIO()
-    with redirect_stdout(io.StringIO()), redirect_stderr(err):
-        status = abu_main(["calibrate-camera", str(stack), "--pattern", "9x6", "--out",
-                           str(cam), "--overwrite"])
-    stack.unlink()
-    if status != 0:
-        raise RuntimeError(f"calibrate-camera failed: {err.getvalue().strip()}")
-    c = json.loads(cam.read_text())
-    o = scn.optics
-    return cam, {"cal_s": time.perf_counter() - t0, "cal_rms_px": c["reprojection_rms_px"],
-                 "cal_k1_err": c["dist_coeffs"][0] - o.k1, "cal_k2_err": c["dist_coeffs"][1] - o.k2,
-                 "cal_centre_err_px": math.hypot(c["camera_matrix"][0][2] - o.optical_centre[0],
-                                                 c["camera_matrix"][1][2] - o.optical_centre[1])}
 
 
 def theta_first_harmonic(times: np.ndarray, theta: np.ndarray, theta_true: np.ndarray) -> float:

@@ -28,29 +28,62 @@ the same tracks are analysed several ways:
   (knots every ms): the same motion, omega = omega_cmd / (tau s + 1). Where the fit is refused
   the default kinematics stand (counted, with the reasons); the lens prior is the default.
 
+With ``--camera [--views N]`` each recording's lens is also calibrated as ``bench_coverage.py
+--camera`` does (``lens_calibration.calibrate``: chessboard views through the scenario's own
+optics, ``abu calibrate-camera``) and the same tracks are analysed as ``abu measure --camera``
+does (``measure_tracks``: positions undistorted, theta's harmonic prior from the calibration):
+
+* ``default + camera``: the default analysis; ``known drive + camera``: the ``known drive``
+  options; ``exact + camera``: the exact kinematics with the calibration's lens prior.
+
 Printed per analysis: coverage of the stated 95 %, intervals missing mu by more than 2 % of mu
 (and the worst), median and 90th percentile relative width, the share of recordings at or
 below 5 %. Then per drive kind: the default, ``known drive`` and both exact rows with the ratio
 of their median width to the exact one on the same recordings, and the model's refusals.
+With ``--camera``: the same per drive kind for the camera rows beside the others, each with its
+ratio to ``exact, no lens prior`` (issue 18's reference with a camera) and to ``exact
+kinematics``, and the calibration's figures. ``--out`` keeps the per-recording rows (JSON
+lines), ``--report`` prints their tables again.
 
 Measured (seeds 0..99 + 10 two-spot): median width default 34.6 %, exact kinematics 18.7 %,
 ``known drive`` 19.4 % (1.01x exact; staircase 1.08x, profile 0.94x: the profile model fits
 theta's harmonics and drops the lens prior the exact row keeps), coverage 100 %, no miss > 2 %;
 the loop model refused on 9 of 69 staircase recordings (``bench_drive_refusals.py``: the
 tracker's error is correlated over a few frames there, the model itself is right).
+With ``--camera`` (same 110 recordings; calibrated lens prior median 2.8e-4 rad against the
+family's 8e-4): ``default + camera`` 30.9 % = 2.36x ``exact, no lens prior`` (12.6 %),
+``known drive + camera`` 16.1 % = 1.25x (staircase 1.23x, profile 1.18x), ``exact +
+camera`` 14.6 % = 1.16x; coverage 100 %, no miss > 2 % for the first two. Median over the
+recordings of the ratio of widths: default over exact with the same camera 2.02x (the local
+kinematics' noise and truncation at the slip), the calibrated lens prior 1.12x; ``known drive
++ camera`` over ``exact, no lens prior`` 1.29x (staircase 1.58x, profile 1.13x: the ratio of
+medians meets 1.3x, the typical staircase recording does not). Unseen seeds, ``--camera``:
+``--first 7000 --n 45 --two-spot 5`` (49 tracked): default + camera 30.5 % = 2.38x, known drive
++ camera 18.4 % = 1.41x (staircase 1.45x, profile 1.20x), exact + camera 1.17x;
+``--first 8000 --n 90 --two-spot 10`` (100 tracked): default + camera 31.2 % = 2.47x, known
+drive + camera 16.2 % = 1.29x (staircase 1.52x, profile 1.13x), exact + camera 1.24x; per
+recording the kinematics 2.05x and 1.99x, the calibrated lens prior 1.16x and 1.13x.
 
 Run (two worker processes, ~10 minutes for 220 recordings on the 2-core machine; one process,
 ~11 minutes for 110 with the ``known drive`` row, 4-6 s CPU a recording; shared machine)::
 
     nice python benchmarks/bench_width_floor.py --n 200 --two-spot 20 --jobs 2
+    nice python benchmarks/bench_width_floor.py --n 100 --two-spot 10 --camera --out rows.jsonl
+    python benchmarks/bench_width_floor.py --report rows.jsonl  # the tables again
+
+(``--camera``: 9.3 s CPU a recording, 1.7 s of it the calibration; 110 recordings in 18
+minutes on one core of the shared machine.)
 """
 from __future__ import annotations
 
 import argparse
 import io
+import json
 import os
+import resource
 import sys
 import tempfile
+import time
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from multiprocessing import Pool
@@ -69,13 +102,21 @@ from controller.profile import Profile, dumps_profile  # noqa: E402
 from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
+from measurement.imaging.camera import read_camera  # noqa: E402
+from measurement.pipeline import MarkerTracks, measure_tracks  # noqa: E402
+from twin.calibration_target import DEFAULT_VIEWS  # noqa: E402
 from twin.drives import profile_accel  # noqa: E402
 from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E402
                                   simulate_scenario)
 from measurement.imaging.tracks_io import read_tracks_csv  # noqa: E402
+from lens_calibration import calibrate  # noqa: E402
 
 MEASURED_KINEMATICS = analysis._kinematics
 KNOWN = "known drive"
+EXACT, NO_LENS = "exact kinematics", "exact, no lens prior"
+#: ``--camera`` rows: name -> (``known drive`` options instead of the default, exact kinematics)
+CAMERA_ROWS = {"default + camera": (False, False), "known drive + camera": (True, False),
+               "exact + camera": (False, True)}
 #: profile.json knot spacing [s] and margin beyond the record [s] (the spline's clamped ends)
 KNOT_S, MARGIN_S = 0.001, 0.05
 
@@ -84,8 +125,8 @@ ANALYSES = {
     "42 ms (default)": (AnalysisOptions(), False),
     "60 ms alone": (AnalysisOptions(sg_window_s=0.06), False),
     "42 + 60 ms intersected": (AnalysisOptions(sg_extra_windows_s=(0.06,)), False),
-    "exact kinematics": (AnalysisOptions(), True),
-    "exact, no lens prior": (AnalysisOptions(
+    EXACT: (AnalysisOptions(), True),
+    NO_LENS: (AnalysisOptions(
         inference=InferenceOptions(theta_harmonic_rad=0.0)), True),
 }
 
@@ -150,26 +191,54 @@ def tracked(seed: int, lighting: str | None):
         return scn, state, tracks, known_drive_options(scn, Path(tmp))
 
 
-def one(job: tuple[int, str | None]) -> dict:
-    """Render, track and analyse one recording every way; {analysis: (lo, hi)} or an error."""
-    seed, lighting = job
+def summary(scn, tracks, opt: AnalysisOptions, state: dict | None = None,
+            camera=None) -> dict:
+    """The summary of one analysis of ``tracks``: with the plant's exact kinematics where
+    ``state`` is given; with ``camera`` (a calibrated lens) as ``abu measure --camera``
+    analyses them (``measure_tracks``: positions undistorted, the calibration's lens prior)."""
+    analysis._kinematics = exact_kinematics(state) if state is not None else MEASURED_KINEMATICS
+    try:
+        if camera is None:
+            return analyse_tracks(tracks.time, tracks.x, tracks.y, l=scn.ball.l, d=scn.ball.d,
+                                  lost=tracks.lost, options=opt)[1]
+        marker_tracks = MarkerTracks(tracks.time, tracks.x, tracks.y, tracks.lost, "tracks.csv",
+                                     {}, (scn.width, scn.height))
+        return measure_tracks(marker_tracks, l_m=scn.ball.l, d_m=scn.ball.d, options=opt,
+                              camera=camera, camera_path="camera.json").summary
+    finally:
+        analysis._kinematics = MEASURED_KINEMATICS
+
+
+def calibrated_camera(scn, views: int):
+    """The scenario's lens as ``abu calibrate-camera`` fits it on ``views`` chessboard views
+    (``lens_calibration.calibrate``, as ``bench_coverage.py --camera``): (camera, its figures)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path, cal = calibrate(scn, Path(tmp), views)
+        return read_camera(path), cal
+
+
+def one(job: tuple[int, str | None, int]) -> dict:
+    """Render, track and analyse one recording every way (``views`` > 0: also with a camera
+    calibrated on that many views); {analysis: (lo, hi)} or an error."""
+    seed, lighting, views = job
     got = tracked(seed, lighting)
     if isinstance(got, int):
         return {"seed": seed, "error": got}
     scn, state, tracks, known = got
     row = {"seed": seed, "mu": scn.ball.mu, "kind": scn.drive.kind, "bounds": {}}
     for name, (opt, exact) in ANALYSES.items():
-        analysis._kinematics = exact_kinematics(state) if exact else MEASURED_KINEMATICS
-        try:
-            _, s = analyse_tracks(tracks.time, tracks.x, tracks.y, l=scn.ball.l, d=scn.ball.d,
-                                  lost=tracks.lost, options=opt)
-        finally:
-            analysis._kinematics = MEASURED_KINEMATICS
+        s = summary(scn, tracks, opt, state if exact else None)
         row["bounds"][name] = (s["mu_low"], s["mu_high"])
-    _, s = analyse_tracks(tracks.time, tracks.x, tracks.y, l=scn.ball.l, d=scn.ball.d,
-                          lost=tracks.lost, options=known)
+    s = summary(scn, tracks, known)
     row["bounds"][KNOWN] = (s["mu_low"], s["mu_high"])
     row["model"], row["why"] = s["estimator"].get("model"), s["estimator"].get("why", "")
+    if views:
+        camera, row["cal"] = calibrated_camera(scn, views)
+        for name, (drive_known, exact) in CAMERA_ROWS.items():
+            s = summary(scn, tracks, known if drive_known else AnalysisOptions(),
+                        state if exact else None, camera)
+            row["bounds"][name] = (s["mu_low"], s["mu_high"])
+        row["lens_prior_rad"] = s["camera"]["theta_harmonic_prior"]["theta_harmonic_rad"]
     return row
 
 
@@ -187,10 +256,31 @@ def scores(rows: list[dict], name: str) -> tuple[list[bool], list[float], list[f
     return inside, misses, widths
 
 
+def width_ratio(rows: list[dict], name: str, ref: str) -> float:
+    """Median relative width of analysis ``name`` over that of ``ref``, on the recordings where
+    both are finite (NaN where there are none)."""
+    w, e = np.array(scores(rows, name)[2]), np.array(scores(rows, ref)[2])
+    both = np.isfinite(w) & np.isfinite(e)
+    return float(np.median(w[both]) / np.median(e[both])) if both.any() else np.nan
+
+
+def per_recording_ratio(rows: list[dict], name: str, ref: str) -> float:
+    """Median over the recordings of the width of ``name`` over that of ``ref`` (where both are
+    finite): how much wider one analysis makes a recording, recording by recording."""
+    w, e = np.array(scores(rows, name)[2]), np.array(scores(rows, ref)[2])
+    both = np.isfinite(w) & np.isfinite(e)
+    return float(np.median(w[both] / e[both])) if both.any() else np.nan
+
+
+def names(rows: list[dict]) -> list[str]:
+    """The analyses of the run: the camera rows where ``--camera`` added them."""
+    return [*ANALYSES, KNOWN] + [n for n in CAMERA_ROWS if n in rows[0]["bounds"]]
+
+
 def report(rows: list[dict]) -> None:
     print(f"  {'analysis':26s} {'coverage':>9s} {'miss > 2 %':>11s} {'worst':>7s} "
           f"{'median':>7s} {'90th pct':>9s} {'<= 5 %':>7s}")
-    for name in [*ANALYSES, KNOWN]:
+    for name in names(rows):
         inside, misses, widths = scores(rows, name)
         w = np.array(widths)
         w = w[np.isfinite(w)]
@@ -199,31 +289,73 @@ def report(rows: list[dict]) -> None:
               f"{100 * np.percentile(w, 90):8.1f}% {100 * np.mean(w <= 0.05):6.1f}%")
 
 
-def report_by_kind(rows: list[dict]) -> None:
-    """Default, known drive and exact per drive kind; width ratios to the exact row on the
-    recordings where both are finite; the model's refusals."""
-    exact = "exact kinematics"
+def by_kind(rows: list[dict], analyses: list[str], refs: list[str]) -> None:
+    """Per drive kind: coverage, misses > 2 %, median width and its ratio to each of ``refs``
+    (on the recordings where both are finite)."""
+    labels = ["/ no lens" if r == NO_LENS else "/ exact" for r in refs]
+    head = "".join(f" {label:>9s}" if refs[0] == NO_LENS else f" {label:>8s}"
+                   for label in labels)
     print(f"  {'drive kind / analysis':34s} {'n':>4s} {'coverage':>9s} {'miss > 2 %':>11s} "
-          f"{'median':>7s} {'/ exact':>8s}")
+          f"{'median':>7s}{head}")
     for kind in ("all", "staircase_pi", "profile"):
         sub = [r for r in rows if kind in ("all", r["kind"])]
         if not sub:
             continue
-        _, _, w_exact = scores(sub, exact)
-        for name in ("42 ms (default)", KNOWN, exact, "exact, no lens prior"):
+        for name in analyses:
             inside, misses, widths = scores(sub, name)
-            w, e = np.array(widths), np.array(w_exact)
-            both = np.isfinite(w) & np.isfinite(e)
-            ratio = np.median(w[both]) / np.median(e[both]) if both.any() else np.nan
+            ratios = "".join(f" {width_ratio(sub, name, ref):{8 if refs[0] == NO_LENS else 7}.2f}x"
+                             for ref in refs)
             print(f"  {kind + ': ' + name:34s} {len(sub):4d} {100 * np.mean(inside):8.1f}% "
-                  f"{sum(m > 0.02 for m in misses):11d} {100 * np.nanmedian(w):6.1f}% "
-                  f"{ratio:7.2f}x")
-        refused = [r for r in sub if r["model"] != "accepted"]
-        print(f"  {kind}: drive model refused on {len(refused)} of {len(sub)} (default "
-              "kinematics used there)")
+                  f"{sum(m > 0.02 for m in misses):11d} {100 * np.nanmedian(widths):6.1f}%"
+                  f"{ratios}")
+        if refs == [EXACT]:
+            refused = [r for r in sub if r["model"] != "accepted"]
+            print(f"  {kind}: drive model refused on {len(refused)} of {len(sub)} (default "
+                  "kinematics used there)")
+
+
+def report_by_kind(rows: list[dict]) -> None:
+    """Default, known drive and exact per drive kind; width ratios to the exact row on the
+    recordings where both are finite; the model's refusals."""
+    by_kind(rows, ["42 ms (default)", KNOWN, EXACT, NO_LENS], [EXACT])
     for r in rows:
         if r["model"] != "accepted":
             print(f"    seed {r['seed']} ({r['kind']}): {r['why']}")
+
+
+def report_camera(rows: list[dict]) -> None:
+    """``--camera``: the camera rows per drive kind beside the default, ``known drive`` and
+    the exact ones, with the ratios to the exact row without the lens prior (issue 18's
+    reference with a camera) and with it; the calibration's figures."""
+    print("with a calibrated camera (width ratios to the exact rows on the same recordings):")
+    by_kind(rows, ["42 ms (default)", "default + camera", KNOWN, "known drive + camera",
+                   "exact + camera", EXACT, NO_LENS], [NO_LENS, EXACT])
+    print("  where the width goes, median over the recordings of the ratio of widths:")
+    for kind in ("all", "staircase_pi", "profile"):
+        sub = [r for r in rows if kind in ("all", r["kind"])]
+        if sub:
+            ratio = {n: per_recording_ratio(sub, n, ref) for n, ref in (
+                ("default + camera", "exact + camera"), ("exact + camera", NO_LENS),
+                ("known drive + camera", NO_LENS))}
+            print(f"    {kind}: kinematics (default+cam / exact+cam) "
+                  f"{ratio['default + camera']:.2f}, lens prior (exact+cam / no lens) "
+                  f"{ratio['exact + camera']:.2f}, known drive+cam / no lens "
+                  f"{ratio['known drive + camera']:.2f}")
+    cal = [r["cal"] for r in rows]
+    prior = np.array([r["lens_prior_rad"] for r in rows])
+    print(f"  calibration: median |k1 error| {np.median([abs(c['cal_k1_err']) for c in cal]):.1e},"
+          f" reprojection RMS {np.median([c['cal_rms_px'] for c in cal]):.3f} px, "
+          f"{np.mean([c['cal_s'] for c in cal]):.2f} s a recording; lens prior on theta's "
+          f"harmonic median {np.median(prior):.1e} rad (90th pct {np.percentile(prior, 90):.1e}; "
+          f"without camera {ANALYSES[EXACT][0].inference.theta_harmonic_rad:.0e})")
+
+
+def print_tables(rows: list[dict]) -> None:
+    """Every table of the run (the ``--camera`` one where its rows are there)."""
+    report(rows)
+    report_by_kind(rows)
+    if "cal" in rows[0]:
+        report_camera(rows)
 
 
 def main() -> None:
@@ -233,9 +365,24 @@ def main() -> None:
     ap.add_argument("--two-spot", type=int, default=20,
                     help="extra recordings forced to the two-reflection lighting")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--camera", action="store_true",
+                    help="also calibrate each recording's lens on chessboard views ('abu "
+                         "calibrate-camera') and analyse as 'abu measure --camera'")
+    ap.add_argument("--views", type=int, default=DEFAULT_VIEWS,
+                    help=f"calibration views with --camera (default {DEFAULT_VIEWS})")
+    ap.add_argument("--out", default=None, help="write the per-recording rows here (JSON lines)")
+    ap.add_argument("--report", default=None,
+                    help="print the tables of rows written by --out (nothing is run)")
     a = ap.parse_args()
-    jobs = [(s, None) for s in range(a.first, a.first + a.n)]
-    jobs += [(s, "two_spot") for s in range(a.first + a.n, a.first + a.n + a.two_spot)]
+    if a.report:
+        rows = [json.loads(line) for line in open(a.report)]
+        print(f"rows of {a.report}: {len(rows)} recordings")
+        print_tables(rows)
+        return
+    views = a.views if a.camera else 0
+    jobs = [(s, None, views) for s in range(a.first, a.first + a.n)]
+    jobs += [(s, "two_spot", views) for s in range(a.first + a.n, a.first + a.n + a.two_spot)]
+    t0 = time.perf_counter()
     if a.jobs > 1:
         pool = Pool(a.jobs)
         rows = pool.map(one, jobs, chunksize=2)
@@ -248,8 +395,13 @@ def main() -> None:
     print(f"harsh twin, rendered: seeds {a.first}..{a.first + a.n - 1} + {a.two_spot} forced "
           f"two-spot; {len(rows)} tracked ({len(failed)} refused by the tracker: {failed}); "
           "reported set at the stated 95 %")
-    report(rows)
-    report_by_kind(rows)
+    print_tables(rows)
+    cpu = sum(getattr(resource.getrusage(who), f) for who in
+              (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN) for f in ("ru_utime", "ru_stime"))
+    print(f"{len(jobs)} recordings: {time.perf_counter() - t0:.0f} s wall, "
+          f"{cpu / len(jobs):.1f} s CPU a recording (shared machine)")
+    if a.out:
+        Path(a.out).write_text("".join(json.dumps(r) + "\n" for r in rows))
 
 
 if __name__ == "__main__":
