@@ -26,7 +26,7 @@ while omega_dot jumps.
 
 **Honest when wrong.** A drive the model does not contain (an undeclared setpoint filter,
 torque ripple, a wrong lag held by a tight prior) leaves a systematic residual. The fit is
-*refused* when the residual is not white: for block lengths of 2, 8 and 32 ms the means of
+*refused* when the residual is not white: for block lengths of 8, 32 and 128 ms the means of
 non-overlapping blocks of the normalised residual must be consistent with white noise of the
 residual's own spread (chi-square over the blocks), and so must the residual averaged over the
 staircase's steps, aligned on them (2 ms bins over the first 16 ms after each step: a model
@@ -35,6 +35,16 @@ there while it drowns in the plain blocks); each test at ``level`` / their numbe
 residual's spread must not exceed the tracking noise by more than ``max_rms_ratio``. A refused
 fit returns the reason; the caller then keeps the Savitzky-Golay kinematics
 (:mod:`measurement.kinematics.estimators`).
+
+No 2 ms blocks, and a residual up to 1.5x the noise estimate (as the profile model,
+:mod:`measurement.kinematics.profile_model`): the tracker's error on a slowly moving CD marker
+is correlated over a few frames (lag-1 autocorrelation up to 0.54 below 1.8 px/frame), which
+2 ms blocks (9 frames) flag and which makes the noise estimate from third differences low,
+although the model is right (``benchmarks/bench_drive_refusals.py``: 9 of 69 rendered
+staircase recordings were refused so, their omega_dot at the slip within 0.43 stated sigma of
+the truth). The wrong drives show over 8 ms and longer and at the steps: a lag 30 % off, a
+torque ripple and an undeclared setpoint filter are refused as often as with 2 ms blocks
+(``tests/test_drive_model.py``, ``benchmarks/bench_drive_model.py``).
 """
 from __future__ import annotations
 
@@ -53,8 +63,8 @@ from measurement.kinematics.estimators import Kinematics, noise_sigma, sample_in
 LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
         ("tau_motor_s", "tau_motor", 0.0), ("setpoint_weight", "setpoint_weight", 1e-3),
         ("setpoint_tau_s", "setpoint_tau", 0.0))
-#: Block lengths of the whiteness test [s].
-BLOCKS_S = (0.002, 0.008, 0.032)
+#: Block lengths of the whiteness test [s] (no 2 ms: see the module doc).
+BLOCKS_S = (0.008, 0.032, 0.128)
 #: Step-locked whiteness test: bins of this length [s] over at most this long after each
 #: step [s] (cut to the shortest gap between steps, so that no sample counts twice).
 STEP_BIN_S, STEP_WINDOW_S = 0.002, 0.016
@@ -68,7 +78,9 @@ class DriveModelSettings:
 
     Attributes:
         level: false-refusal level of the whiteness test (all block lengths together) [-].
-        max_rms_ratio: largest accepted residual rms / tracking noise [-].
+        max_rms_ratio: largest accepted residual rms / tracking noise [-] (1.5: the noise
+            estimate runs low on correlated tracking error; the covariance is scaled up by
+            the ratio either way).
         t_off_max_s: the record's time offset to the staircase is fitted within +- this [s].
         free_loop: fit every loop parameter freely (ignore the drive file's intervals).
         harmonics: harmonics of theta fitted as a fixed pattern of the camera (lens, axis).
@@ -81,7 +93,7 @@ class DriveModelSettings:
     """
 
     level: float = 0.001
-    max_rms_ratio: float = 1.25
+    max_rms_ratio: float = 1.5
     t_off_max_s: float = 0.05
     free_loop: bool = False
     harmonics: int = 3
