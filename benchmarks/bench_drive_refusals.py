@@ -19,6 +19,11 @@ the refused ones' tracking error has a lag-1 autocorrelation 0.12-0.54 (accepted
 so the noise estimate from third differences is low (rms 1.13-1.69 x) and 2 ms block means are
 not white; 8 of the 27 with the CD marker below 1.8 px/frame are refused, 1 of the 42 above;
 with the tests off, omega_dot at the slip errs by at most 0.43 stated standard errors there.
+Those were the 2 ms blocks and the 1.25 rms limit of the time. With the profile model's blocks
+(8, 32, 128 ms) and limit (1.5), the drive model's own since the sixth session: 2 of 69
+refused (rms 1.57 and 1.69 x, lag-1 autocorrelation 0.51-0.54), the accepted ones' omega_dot
+at the slip within 1.27 stated standard errors; seeds 7000-7049 (26 staircase recordings): 0
+refused (5 before).
 
 Run::
 
