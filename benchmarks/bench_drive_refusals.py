@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from bench_width_floor import tracked  # noqa: E402
+from bench_width_floor import family_seeds, tracked  # noqa: E402
 from measurement.imaging import tracks_io  # noqa: E402
 from measurement.imaging.geometry import fixed_axis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, _estimator, _fill_lost  # noqa: E402
@@ -85,9 +85,8 @@ def main() -> None:
     ap.add_argument("--two-spot", type=int, default=10,
                     help="extra recordings forced to the two-reflection lighting")
     a = ap.parse_args()
-    jobs = [(s, None) for s in range(a.first, a.first + a.n)]
-    jobs += [(s, "two_spot") for s in range(a.first + a.n, a.first + a.n + a.two_spot)]
-    rows = [r for r in (one(*j) for j in jobs) if r is not None]
+    rows = [r for r in (one(*j) for j in family_seeds(a.first, a.n, a.two_spot))
+            if r is not None]
     print(f"staircase drives of the harsh twin, rendered and tracked: seeds {a.first}.."
           f"{a.first + a.n - 1} + {a.two_spot} forced two-spot; {len(rows)} recordings; the "
           "true loop fitted as bench_width_floor.py's 'known drive'")

@@ -358,6 +358,13 @@ def print_tables(rows: list[dict]) -> None:
         report_camera(rows)
 
 
+def family_seeds(first: int, n: int, two_spot: int) -> list[tuple[int, str | None]]:
+    """(seed, forced lighting) of the family: ``n`` seeds from ``first`` with their own
+    lighting, then ``two_spot`` more forced to the two-reflection lighting."""
+    return ([(s, None) for s in range(first, first + n)]
+            + [(s, "two_spot") for s in range(first + n, first + n + two_spot)])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=0, help="first seed")
@@ -380,8 +387,7 @@ def main() -> None:
         print_tables(rows)
         return
     views = a.views if a.camera else 0
-    jobs = [(s, None, views) for s in range(a.first, a.first + a.n)]
-    jobs += [(s, "two_spot", views) for s in range(a.first + a.n, a.first + a.n + a.two_spot)]
+    jobs = [(s, lighting, views) for s, lighting in family_seeds(a.first, a.n, a.two_spot)]
     t0 = time.perf_counter()
     if a.jobs > 1:
         pool = Pool(a.jobs)
