@@ -47,8 +47,8 @@ same torque lag (``tau_motor_s``, default 0)::
 by name), nor ``bandwidth_rad_s`` of the PI models.
 
 Checked on load, each refusal naming the file and the field: every number finite and within
-its field's range (:data:`UPPER`), every ``*_ci95`` a pair 0 <= low <= high <= that range's
-top; an optional field given as ``null`` is absent; a PI loop must be stable: tau_motor
+its field's range (:data:`UPPER`; > 0 but for :data:`MAY_BE_ZERO`), every ``*_ci95`` a pair
+low <= high within that same range; an optional field given as ``null`` is absent; a PI loop must be stable: tau_motor
 < 2 zeta / omega_n (Routh-Hurwitz on its characteristic polynomial above).
 """
 from __future__ import annotations
@@ -157,6 +157,11 @@ class Drive:
         return self.model == "tracking"
 
     @property
+    def is_stable(self) -> bool:
+        """The loop is stable: a tracking loop always; a PI loop below :func:`lag_limit_s`."""
+        return self.model == "tracking" or self.tau_motor < lag_limit_s(self.zeta, self.omega_n)
+
+    @property
     def has_setpoint_filter(self) -> bool:
         """A setpoint filter is declared: ``setpoint_tau_s`` > 0 or its interval alone (the
         drive model then fits it from the interval's middle)."""
@@ -199,6 +204,8 @@ class Drive:
 #: a damping ratio, the natural frequency of a CD drive's speed loop, a motor's torque lag.
 UPPER = {"zeta": 1000.0, "omega_n_rad_s": 1.0e4, "tau_motor_s": 1.0, "setpoint_weight": 100.0,
          "bandwidth_rad_s": 1.0e5, "setpoint_tau_s": 1.0, "sample_time_s": 1.0}
+#: Fields that may be 0 (no lag, no setpoint filter); every other one must be > 0.
+MAY_BE_ZERO = ("tau_motor_s", "setpoint_tau_s")
 
 
 def _check_number(source: str, name: str, value: Any, low: float, strict: bool) -> float:
@@ -218,12 +225,17 @@ def _given(obj: dict, name: str, default: Any) -> Any:
     return default if value is None else value
 
 
-def _check_stable(source: str, zeta: float, omega_n: float, tau_motor: float) -> None:
-    """A PI loop with a torque lag is stable only below the Routh-Hurwitz limit of its
-    characteristic polynomial tau s^3 + s^2 + 2 zeta omega_n s + omega_n^2: tau < 2 zeta /
+def lag_limit_s(zeta: float, omega_n: float) -> float:
+    """The torque lag [s] from which a PI loop is unstable: the Routh-Hurwitz limit of its
+    characteristic polynomial tau s^3 + s^2 + 2 zeta omega_n s + omega_n^2 is tau < 2 zeta /
     omega_n. A drive identified from a record was stable while recorded; beyond the limit
     its speed oscillates ever more and every plan and kinematic model built on it is void."""
-    limit = 2.0 * zeta / omega_n
+    return 2.0 * zeta / omega_n
+
+
+def _check_stable(source: str, zeta: float, omega_n: float, tau_motor: float) -> None:
+    """DriveFileError naming ``tau_motor_s`` at or beyond :func:`lag_limit_s`."""
+    limit = lag_limit_s(zeta, omega_n)
     if tau_motor >= limit:
         raise DriveFileError(source, f"a torque lag below 2 zeta / omega_n = {limit:.4g} s, got "
                                      f"{tau_motor:g} s: with it the loop tau s^3 + s^2 + 2 zeta "
@@ -263,7 +275,7 @@ def drive_from_dict(obj: Any, source: str = "drive.json") -> Drive:
               (("zeta", None), ("omega_n_rad_s", None), ("tau_motor_s", 0.0),
                ("setpoint_weight", 1.0))}
     for name, value in values.items():
-        _check_number(source, name, value, 0.0, strict=name != "tau_motor_s")
+        _check_number(source, name, value, 0.0, strict=name not in MAY_BE_ZERO)
     _check_stable(source, float(values["zeta"]), float(values["omega_n_rad_s"]),
                   float(values["tau_motor_s"]))
     tau_f = _check_number(source, "setpoint_tau_s", _given(obj, "setpoint_tau_s", 0.0), 0.0,
@@ -293,11 +305,12 @@ def _intervals(obj: dict, model: str, source: str) -> dict[str, tuple[float, flo
                                and math.isfinite(v) for v in pair) or pair[0] > pair[1]):
                 raise DriveFileError(source, f"expected [low, high] with low <= high, got {pair!r}",
                                      key)
-            if pair[0] < 0.0 or pair[1] > UPPER[name]:
+            zero_ok = name in MAY_BE_ZERO
+            if (pair[0] < 0.0 if zero_ok else pair[0] <= 0.0) or pair[1] > UPPER[name]:
                 # a design takes its corners and the drive model its middle as a prior: within
                 # the field's own range
-                raise DriveFileError(source, f"expected 0 <= low <= high <= {UPPER[name]:g}, got "
-                                             f"{pair!r}", key)
+                raise DriveFileError(source, f"expected 0 {'<=' if zero_ok else '<'} low <= high "
+                                             f"<= {UPPER[name]:g}, got {pair!r}", key)
             ci95[name] = (float(pair[0]), float(pair[1]))
     return ci95
 

@@ -288,6 +288,7 @@ def test_drive_json_refuses_an_unstable_loop_at_the_routh_hurwitz_limit():
             tau = factor * limit
             roots = np.roots([tau, 1.0, 2.0 * zeta * wn, wn**2])
             assert (roots.real.max() < 0) == stable
+            assert Drive("pi-lag", zeta, wn, tau).is_stable == stable
             obj = Drive("pi-lag", 0.5, 10.0, 0.01).to_dict()
             obj.update(zeta=zeta, omega_n_rad_s=wn, tau_motor_s=tau)
             if stable:
@@ -304,10 +305,14 @@ def test_drive_json_optional_nulls_are_absent_and_intervals_in_range():
         back = drive_from_dict({**good, name: None}, "x.json")
         assert back.value(name) == default, name
     for key, pair in (("zeta_ci95", [-0.1, 0.8]), ("omega_n_rad_s_ci95", [10.0, 2e4]),
-                      ("tau_motor_s_ci95", [0.0, 1.5]), ("setpoint_weight_ci95", [-1.0, 1.0])):
+                      ("tau_motor_s_ci95", [0.0, 1.5]), ("setpoint_weight_ci95", [-1.0, 1.0]),
+                      ("omega_n_rad_s_ci95", [0.0, 20.0]), ("zeta_ci95", [0.0, 0.8])):
         with pytest.raises(DriveFileError, match=key):
             drive_from_dict({**good, key: pair}, "x.json")
     assert drive_from_dict({**good, "zeta_ci95": [0.6, 0.8]}, "x.json").ci95["zeta"] == (0.6, 0.8)
+    # no lag is a lag: its interval may start at 0
+    assert drive_from_dict({**good, "tau_motor_s_ci95": [0.0, 0.03]},
+                           "x.json").ci95["tau_motor_s"] == (0.0, 0.03)
 
 
 def test_identify_refuses_a_fitted_unstable_loop():

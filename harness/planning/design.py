@@ -382,7 +382,7 @@ def _with_width(design: Design) -> Design:
 def drive_corners(drive: Drive) -> list[Drive]:
     """The drive at every corner of its 95 % intervals that is a stable loop (empty without
     intervals). The box of the intervals is wider than their joint region; a corner beyond
-    the Routh-Hurwitz limit tau_motor < 2 zeta / omega_n is a drive that cannot have run the
+    the Routh-Hurwitz limit (``Drive.is_stable``) is a drive that cannot have run the
     record it was identified from (drive.json refuses such a drive), so no plan is held to it."""
     # the setpoint filter's interval too (the drive model fits it like the loop's parameters)
     every = MODEL_PARAMETERS["pi-lag-weighted"] + ("setpoint_tau_s",)
@@ -393,14 +393,11 @@ def drive_corners(drive: Drive) -> list[Drive]:
     for corner in itertools.product(*(drive.ci95[n] for n in names)):
         v = {n: drive.value(n) for n in every}
         v.update(zip(names, corner))
-        if drive.model != "second-order" and \
-                v["tau_motor_s"] >= 2.0 * v["zeta"] / v["omega_n_rad_s"]:
-            continue
         out.append(Drive(drive.model, v["zeta"], v["omega_n_rad_s"],
                          v["tau_motor_s"] if drive.model != "second-order" else 0.0,
                          v["setpoint_weight"] if drive.model == "pi-lag-weighted" else 1.0,
                          setpoint_tau=v["setpoint_tau_s"], sample_time=drive.sample_time))
-    return out
+    return [c for c in out if c.is_stable]
 
 
 def holds(spec: DesignSpec, staircase: Staircase) -> bool:

@@ -27,7 +27,7 @@ from scipy.signal import savgol_filter
 from scipy.stats import t as student_t
 
 from abu_model.errors import AbuError, ParameterError
-from controller.drive import MODEL_PARAMETERS, MODELS, Drive
+from controller.drive import MODEL_PARAMETERS, MODELS, Drive, lag_limit_s
 
 from harness.planning.loop_response import Setpoints, response
 from harness.planning.record_io import Record, omega_from_pulses
@@ -196,10 +196,10 @@ def fit_drive(record: Record, setpoints: Setpoints, model: str = "pi-lag") -> Id
     cov = cov_q[:k, :k] * np.outer(scale, scale)  # delta method, for reporting
     std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)}
     zeta, wn, tau, b = _unpack(sol.x, model)
-    if tau >= 2.0 * zeta / wn:   # what drive.json refuses (controller.drive, Routh-Hurwitz)
+    if tau >= lag_limit_s(zeta, wn):   # what drive.json refuses
         raise disagree(f"the fitted loop is unstable: tau_motor {tau:.4g} s >= 2 zeta / "
-                       f"omega_n = {2.0 * zeta / wn:.4g} s, a speed oscillation that grows "
-                       "without bound, which no running drive shows")
+                       f"omega_n = {lag_limit_s(zeta, wn):.4g} s, a speed oscillation that "
+                       "grows without bound, which no running drive shows")
     if model != "second-order" and tau <= 1.01e-5:
         check["message"] += "; tau_motor is at its lower limit (no lag seen)"
     fit_info = {"record": record.source, "record_kind": record.kind, "samples": int(t.size),
