@@ -356,7 +356,7 @@ def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     std = {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(model.names)}
     std.update(theta0_rad=float(math.sqrt(cov[k, k])), omega_offset_rad_s=float(
         math.sqrt(cov[k + 1, k + 1])))
-    block_p = _whiteness(res, dt, getattr(model, "blocks_s", BLOCKS_S))
+    block_p = _whiteness(res, dt)
     if hasattr(model, "step_frames"):
         block_p.update(_step_locked(res, *model.step_frames(p), dt))
     fit = DriveFit(True, "", params, std, omega, alpha, se_w, se_a, rms_ratio, block_p,

@@ -32,22 +32,14 @@ from measurement.kinematics.estimators import noise_sigma, sample_interval
 
 #: the gain's fitted range [-]
 GAIN_RANGE = (0.5, 2.0)
-#: Block lengths of the whiteness test [s]. Not the staircase's 2 ms: at the profile's speeds
-#: (up to 40 Hz, the markers cross several pixels a frame) the tracker's noise is correlated
-#: over a few frames, which 2 ms blocks (9 frames) flag although the model is right (seed 105
-#: of bench_profile_drive: fitted bandwidth, lag, gain and offset all at the truth, refused at
-#: 2 ms only); a wrong loop or a torque ripple shows over 8 ms and longer.
-BLOCKS_S = (0.008, 0.032, 0.128)
-#: Largest accepted residual rms / tracking noise: the tracker's noise estimate (from the
-#: shortest differences) is low when its noise is correlated over a few frames (seed 107 of
-#: bench_profile_drive: 1.2504 with every parameter at the truth and white blocks); the
-#: covariance is scaled up by this ratio either way.
-MAX_RMS_RATIO = 1.5
-
-
-def profile_settings(**changes) -> DriveModelSettings:
-    """The profile fit's default settings (:class:`DriveModelSettings` with MAX_RMS_RATIO)."""
-    return DriveModelSettings(**{"max_rms_ratio": MAX_RMS_RATIO, **changes})
+# The whiteness test's blocks (8, 32, 128 ms) and rms limit (1.5x) are the drive model's
+# defaults (measurement.kinematics.drive_model), first chosen here: at the profile's speeds
+# (up to 40 Hz, the markers cross several pixels a frame) the tracker's noise is correlated
+# over a few frames, which 2 ms blocks (9 frames) flag although the model is right (seed 105
+# of bench_profile_drive: fitted bandwidth, lag, gain and offset all at the truth, refused at
+# 2 ms only), and which makes the noise estimate low (seed 107: rms 1.2504 x with every
+# parameter at the truth and white blocks); a wrong loop or a torque ripple shows over 8 ms
+# and longer.
 Z95 = 1.959964
 
 
@@ -57,7 +49,6 @@ class _ProfileModel:
     def __init__(self, time: np.ndarray, drive: Drive, profile: Profile,
                  settings: DriveModelSettings):
         self.t, self.profile = time, profile
-        self.blocks_s = BLOCKS_S
         self.names = ["t_off_s", "gain"]
         self.x0 = [0.0, 1.0]
         self.lo = [-settings.t_off_max_s, GAIN_RANGE[0]]
@@ -88,7 +79,7 @@ def fit_profile_model(time: np.ndarray, theta: np.ndarray, drive: Drive, profile
                       sigma_theta: float | None = None,
                       settings: DriveModelSettings | None = None) -> DriveFit:
     """Fit the known profile through the known loop to theta(t) (see the module doc)."""
-    st = settings or profile_settings()
+    st = settings or DriveModelSettings()
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
     sample_interval(t)
@@ -113,7 +104,7 @@ class ProfileModelInput:
 
     drive: Drive
     profile: Profile
-    settings: DriveModelSettings = field(default_factory=profile_settings)
+    settings: DriveModelSettings = field(default_factory=DriveModelSettings)
     #: the fit's linear basis holds theta's harmonics 1-3 (the camera's fixed pattern: lens,
     #: eccentric axis), so a lens harmonic does not pass into omega_dot: the analysis drops
     #: its lens prior (``theta_harmonic_rad``) for these kinematics (measured:
