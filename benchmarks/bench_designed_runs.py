@@ -60,6 +60,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from multiprocessing import Pool
@@ -331,6 +332,12 @@ def report(rows: list[dict], label: str) -> None:
         print(f"  what sets it (medians of abu measure's parts, relative to mu): beta profile "
               f"{med[0]:.1f} %, lens prior 2 A (lever/mu + 2) {med[1]:.1f} %, truncation bound "
               f"x 2 {med[2]:.1f} %, kinematic noise (z_lo + z) sigma {med[3]:.1f} %")
+        prof = np.array([((r["profile_mu_high"] - r["profile_mu_low"]) / r["mu"])
+                         / r["pred"]["profile"] for r in fin if r["pred"]["profile"]])
+        if prof.size:
+            print(f"  beta profile measured / predicted (at mu_d / mu = 0.8): median "
+                  f"{np.median(prof):.2f}, 5-95 % [{np.percentile(prof, 5):.2f}, "
+                  f"{np.percentile(prof, 95):.2f}]")
 
 
 def report_second(rows: list[dict], label: str) -> None:
@@ -499,6 +506,7 @@ def main() -> None:
               f"{max(r['seed'] for r in rows)}")
         report_slices(rows)
         return
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
     cfg = configs()
     designs = {c: run_design(*c, a.design_args.split()) for c in cfg}
     for (rng, dname), d in designs.items():
@@ -528,6 +536,9 @@ def main() -> None:
           f"{', '.join(DRIVES)}), true mu log-uniform in each range, mu_d/mu in {MU_D_RATIO}, "
           "lighting and lens of twin.scenario.random_scenario(seed)")
     report_slices(rows)
+    print(f"{len(rows)} runs: {time.perf_counter() - t_wall:.0f} s wall, "
+          f"{time.process_time() - t_cpu:.0f} s CPU in this process "
+          f"({'its worker processes not counted' if a.jobs > 1 else 'one process'})")
 
 
 def report_slices(rows: list[dict]) -> None:
