@@ -220,6 +220,32 @@ def miss(lo: float | None, hi: float | None, mu: float) -> float:
     return out
 
 
+def calibrated_misses(rows: list[dict], lo_k: str = "mu_low", hi_k: str = "mu_high",
+                      margin: float = 0.02, level: float = 0.95) -> tuple[float, float, int]:
+    """What "no miss by more than ``margin``" asks of intervals of these widths.
+
+    A calibrated interval at ``level`` (mu's error Gaussian, the interval centre +- z sigma)
+    misses mu by more than ``margin`` of mu with probability 2 Phi(-(z + margin mu / sigma)):
+    the narrower the interval, the likelier a miss beyond a fixed margin. Returns (the expected
+    number of such misses over the rows with both bounds, the standard deviation of mu's
+    position in them, (mu - centre) / sigma, 1 for calibrated intervals and below 1 for
+    conservative ones, the number of rows used).
+    """
+    from statistics import NormalDist
+    nd = NormalDist()
+    z = nd.inv_cdf(0.5 + 0.5 * level)
+    both = [r for r in rows if r.get(lo_k) is not None and r.get(hi_k) is not None
+            and r[hi_k] > r[lo_k]]
+    if not both:
+        return float("nan"), float("nan"), 0
+    mu = np.array([r["mu"] for r in both])
+    lo = np.array([r[lo_k] for r in both])
+    hi = np.array([r[hi_k] for r in both])
+    sigma = 0.5 * (hi - lo) / z
+    expected = float(sum(2.0 * nd.cdf(-(z + margin * m / s)) for m, s in zip(mu, sigma)))
+    return expected, float(np.std((mu - 0.5 * (lo + hi)) / sigma)), len(both)
+
+
 def onset_report(ok: list[dict]) -> None:
     """Coverage of the true first slip onset by [t_slip_low, t_slip_high] (a null end is no
     claim: counted apart, and only finite brackets count as hits)."""
@@ -289,6 +315,12 @@ def report(rows: list[dict], label: str) -> None:
               f"both bounds in {both}: relative width median "
               f"{100 * np.median(widths) if widths else float('nan'):.1f} %, 90th percentile "
               f"{100 * np.percentile(widths, 90) if widths else float('nan'):.1f} %")
+    expected, spread, n_both = calibrated_misses(ok)
+    print(f"  for comparison, calibrated 95 % intervals of the reported widths (mu's error "
+          f"Gaussian, sigma = half-width / 1.96) would miss mu by > 2 % about {expected:.1f} "
+          f"times in these {n_both} ({100 * expected / max(n_both, 1):.1f} %); mu's position "
+          f"in the reported intervals, (mu - centre) / sigma, has spread {spread:.2f} (1 if "
+          f"calibrated, below 1 if conservative)")
     # Width by drive class: where a setpoint step reaches the acceleration through almost no
     # lag (staircase, torque lag + setpoint filter < 5 ms: alpha rises within a fraction of
     # the 36 ms kinematic window) no method can beat the jump's [mu_req(t-), mu_req(t+)];
