@@ -27,6 +27,7 @@ from abu_model.json_text import dumps
 from measurement.imaging import tracks_io
 from measurement.imaging.compression import lossy_status
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks
+from measurement.inference.lighting_models import alternative_orders
 from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
@@ -254,7 +255,8 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             **_rate_info(rec, rate), "frames": int(time.size),
             "lost_frames": {name: int(lost[:, j].sum()) for j, name in enumerate(ROLES)},
             "lost_reasons": tracks.lost_summary(),
-            "compression": detect(frames, rec.codec).summary()}
+            "compression": detect(frames, rec.codec).summary(),
+            "ball_reflections": int(settings.ball_reflections)}
     return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
 
 
@@ -320,6 +322,9 @@ def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float
     check_marker_geometry(tracks.x_px, tracks.y_px, source)
     check_motion_and_roles(tracks.time_s, tracks.x_px, tracks.y_px, source)
     x, y, camera_info = tracks.x_px, tracks.y_px, None
+    if options.harmonic_orders_alternative is None:   # chosen by the ball's highlights
+        options = replace(options, harmonic_orders_alternative=alternative_orders(
+            tracks.info.get("ball_reflections")))
     if camera is not None:
         from measurement.imaging.camera import undistort_tracks
         x, y, prior, camera_info = undistort_tracks(camera_path or "camera", camera, x, y,

@@ -109,17 +109,53 @@ def test_the_analysis_joins_the_second_model_where_it_matters():
 def test_seed_2046_holds_mu_with_two_lighting_models(tmp_path, capsys):
     """Rendered end to end (harsh twin, unseen seed 2046: two reflections, 0.8 turn of the
     ball's angle in the fit window). One lighting model: [0.0328, 0.0521] for mu = 0.02826, a
-    miss of 16 %; the second (orders 1-6) allows it, the union holds it."""
+    miss of 16 %; the second (orders 1-6) allows it, the union holds it. With two
+    reflections the default (``--lighting-models auto``) is the two models."""
     from rendered_seed import render_and_measure
 
-    one, mu = render_and_measure(2046, tmp_path, "--ball-reflections", "2")
+    one, mu = render_and_measure(2046, tmp_path, "--ball-reflections", "2",
+                                 "--lighting-models", "one")
     assert one["mu_low"] > 1.02 * mu                       # the miss the option is for
-    two, _ = render_and_measure(2046, tmp_path, "--ball-reflections", "2",
-                                "--lighting-models", "two")
+    assert one["input"]["ball_reflections"] == 2
+    assert "second_lighting_orders" not in one["model_fit"]
+    two, _ = render_and_measure(2046, tmp_path, "--ball-reflections", "2")
+    assert two["model_fit"]["second_lighting_orders"] == [1, 2, 3, 4, 5, 6]
     assert two["mu_low"] <= mu <= two["mu_high"]
     assert two["mu_high"] == one["mu_high"]                # the union only widened down
     assert len(two["model_fit"]["lighting_models"]) == 2
     capsys.readouterr()
+
+
+def test_the_default_second_model_follows_the_ball_reflections():
+    """``AnalysisOptions()`` leaves the choice to the tracking: the pipeline takes orders 1-6
+    as the second model for tracks of a ball with two reflections, none for one reflection
+    or tracks that do not say (a CSV), and an explicit choice stands either way."""
+    from dataclasses import replace
+
+    from measurement.inference.analysis import AnalysisOptions
+    from measurement.inference.lighting_models import TWO_SPOT_ORDERS, alternative_orders
+    from measurement.pipeline import MarkerTracks, measure_tracks
+    from test_inference import scenario_tracks
+
+    assert alternative_orders(2) == TWO_SPOT_ORDERS == (1, 2, 3, 4, 5, 6)
+    assert alternative_orders(1) == alternative_orders(None) == ()
+    assert AnalysisOptions().harmonic_orders_alternative is None
+    times, x, y, ball, _ = scenario_tracks(11)
+    lost = np.zeros(x.shape, bool)
+    base = MarkerTracks(times, x, y, lost, "tracks", {}, (256, 256))
+
+    def orders(info, options=AnalysisOptions()):
+        mf = measure_tracks(replace(base, info=info), l_m=ball.l, d_m=ball.d,
+                            options=options).summary["model_fit"]
+        return mf.get("second_lighting_orders")
+
+    assert orders({"ball_reflections": 2}) == [1, 2, 3, 4, 5, 6]
+    assert orders({"ball_reflections": 1}) is None
+    assert orders({}) is None
+    assert orders({"ball_reflections": 2},
+                  AnalysisOptions(harmonic_orders_alternative=())) is None
+    assert orders({"ball_reflections": 1}, AnalysisOptions(
+        harmonic_orders_alternative=(1, 2, 3, 4, 5))) == [1, 2, 3, 4, 5]
 
 
 def test_bad_alternative_orders_are_refused_by_name():

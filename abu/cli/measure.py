@@ -85,8 +85,9 @@ def cmd_track(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------ measure
 
-#: ``--lighting-models`` -> the second lighting model's harmonic orders (() none).
-LIGHTING_MODELS = {"one": (), "two": (1, 2, 3, 4, 5, 6)}
+#: ``--lighting-models`` -> the second lighting model's harmonic orders (() none; None: by
+#: the ball's reflections, ``measurement.inference.lighting_models.alternative_orders``).
+LIGHTING_MODELS = {"auto": None, "one": (), "two": (1, 2, 3, 4, 5, 6)}
 
 def _analysis_options(args: argparse.Namespace):
     from measurement.inference.analysis import AnalysisOptions
@@ -246,10 +247,11 @@ def register(subparsers) -> None:
                    help="do not remove the lighting harmonic from beta")
     p.add_argument("--harmonic-phase", choices=["ball", "cd"], default="ball",
                    help="phase of the harmonic: ball angle (default) or theta")
-    p.add_argument("--lighting-models", choices=sorted(LIGHTING_MODELS), default="one",
-                   help="one: the lighting harmonics of orders 1-4 removed from beta "
-                        "(default); two: also orders 1-6, and the union of both models' sets "
-                        "where they disagree at the slip (a second inference, ~0.35 s)")
+    p.add_argument("--lighting-models", choices=sorted(LIGHTING_MODELS), default="auto",
+                   help="one: the lighting harmonics of orders 1-4 removed from beta; two: "
+                        "also orders 1-6, and the union of both models' sets where they "
+                        "disagree at the slip (a second inference, ~0.1 s); auto (default): "
+                        "two with --ball-reflections 2, one otherwise (and with --tracks)")
     p.add_argument("--mc-draws", type=int, default=0,
                    help="Monte Carlo draws of tracking noise through the running-max interval "
                         "(default 0: the model's profile likelihood is the uncertainty)")

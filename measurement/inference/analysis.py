@@ -142,7 +142,7 @@ def _second_lighting_model(time: np.ndarray, theta: np.ndarray, beta: np.ndarray
                            ) -> inference_mod.Inference:
     """``inf`` joined with the set under the alternative lighting orders where the two
     models' cleaned betas disagree in the fit window (:mod:`lighting_models`)."""
-    alt_orders = tuple(opt.harmonic_orders_alternative)
+    alt_orders = tuple(opt.harmonic_orders_alternative or ())   # None (not chosen): none
     if not opt.harmonic or not alt_orders or alt_orders == tuple(opt.harmonic_orders):
         return inf
     alt = _lighting_fit(time, theta, beta, alt_orders, direction, opt)
@@ -152,10 +152,12 @@ def _second_lighting_model(time: np.ndarray, theta: np.ndarray, beta: np.ndarray
                                             tuple(opt.inference.harmonic_orders),
                                             opt.inference.theta_harmonics, winv)
     if chi2 <= lighting_models.DISAGREEMENT_CHI2:
-        return replace(inf, details={**inf.details, "lighting_disagreement_chi2": chi2})
+        return replace(inf, details={**inf.details, "lighting_disagreement_chi2": chi2,
+                                     "second_lighting_orders": list(alt_orders)})
     other = _model_set(time, theta, alt, kin, iv, lost_any, l, d, direction, opt)
     union = lighting_models.union_sets(inf, other, (tuple(opt.harmonic_orders), alt_orders))
-    return replace(union, details={**union.details, "lighting_disagreement_chi2": chi2})
+    return replace(union, details={**union.details, "lighting_disagreement_chi2": chi2,
+                                   "second_lighting_orders": list(alt_orders)})
 
 
 def _onset(time: np.ndarray, kin: kin_mod.Kinematics, l: float, d: float, direction: int,

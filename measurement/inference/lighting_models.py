@@ -29,6 +29,20 @@ from measurement.inference.fit_window import harmonic_design
 from measurement.inference.noise_models import leftover_whitener_of
 from measurement.inference.types import LOST_ACROSS_SLIP, Inference
 
+#: The second lighting model of a ball showing two reflections: orders 1-6 (a two-spot ball's
+#: highlights put harmonics up to order 6 into beta; see the module doc).
+TWO_SPOT_ORDERS = (1, 2, 3, 4, 5, 6)
+
+
+def alternative_orders(ball_reflections: int | None) -> tuple[int, ...]:
+    """The default second lighting model (``AnalysisOptions.harmonic_orders_alternative``
+    None): :data:`TWO_SPOT_ORDERS` where the tracking found the ball with two reflections,
+    none with one or where the tracks do not say (a CSV of tracks alone). The two-spot
+    recordings are where orders 1-4 were seen to miss (seeds 2046, 3011, 106), and only they
+    pay the second inference: a one-spot recording is analysed as before."""
+    return TWO_SPOT_ORDERS if ball_reflections == 2 else ()
+
+
 #: The second lighting model's set is computed when replacing the first model's cleaned beta
 #: by the second's changes the likelihood-ratio statistic at a bound by more than this [chi^2]
 #: (the set's edge is where the statistic crosses its critical value, 3.84 at 95 %: a change

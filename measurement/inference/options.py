@@ -41,7 +41,10 @@ class AnalysisOptions:
         harmonic_orders_alternative: a second lighting model of the record (``abu measure
             --lighting-models two``: orders 1-6); where it changes beta in the fit window
             beyond the window's nuisances, the reported set is the union of both models' sets
-            (:mod:`lighting_models`); () (default) off: it costs a second inference.
+            (:mod:`lighting_models`); () off (it costs a second inference); None (default):
+            chosen by the ball's highlights where the tracking states them
+            (:func:`lighting_models.alternative_orders`: orders 1-6 for a ball showing two
+            reflections, none for one), none where it does not (tracks alone).
         harmonic_amp_degree: polynomial degree in time of the harmonic's amplitude.
         harmonic_phase: ``ball`` (ball angle in the image, theta + beta) or ``cd`` (theta).
         knot_spacing_s: knot spacing of the monotone beta basis [s].
@@ -71,7 +74,7 @@ class AnalysisOptions:
     trim_s: float | None = None
     harmonic: bool = True
     harmonic_orders: tuple[int, ...] = (1, 2, 3, 4)
-    harmonic_orders_alternative: tuple[int, ...] = ()
+    harmonic_orders_alternative: tuple[int, ...] | None = None
     harmonic_amp_degree: int = 0
     harmonic_phase: str = "ball"
     knot_spacing_s: float = 0.005
@@ -107,10 +110,12 @@ class AnalysisOptions:
                                  "a tuple of windows > 0 s")
         for w in self.sg_extra_windows_s:
             check_positive("sg_extra_windows_s", w, "s")
-        if not all(isinstance(k, numbers.Integral) and k >= 1
-                   for k in self.harmonic_orders_alternative):
+        if self.harmonic_orders_alternative is not None and not all(
+                isinstance(k, numbers.Integral) and k >= 1
+                for k in self.harmonic_orders_alternative):
             raise ParameterError("harmonic_orders_alternative", self.harmonic_orders_alternative,
-                                 "harmonic orders >= 1 (() for one lighting model)")
+                                 "harmonic orders >= 1 (() for one lighting model, None to "
+                                 "choose by the ball's reflections)")
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
         if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
             raise ParameterError("trim_s", self.trim_s, ">= 0 s")
