@@ -489,3 +489,34 @@ def test_the_silhouette_follows_a_fast_ball_along_the_cd(monkeypatch):
     track_ball = R.track_ball
     monkeypatch.setattr(R, "track_ball", lambda *a, guide=None, **k: track_ball(*a, **k))
     assert _alt_track(f, seeds, t)[0] > 0.02
+
+
+def test_find_markers_takes_a_dark_ball_by_its_body():
+    """Under diffuse light (twin.lighting_alt, unseen seeds) a dark ball's reflections are too
+    faint for a bright blob: the finder takes the ball by its body (|frame - background| over a
+    disk) and finds all three markers near the truth; with the ball painted over by the plane
+    it still asks for --seeds rather than take noise for a ball."""
+    from measurement.imaging.markers import MarkerError, ball_body, detect_blobs, find_markers
+    from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario
+
+    for seed in (11000, 11028, 11039):
+        scn = random_scenario(seed, lighting="two_spot_alt").with_(n_frames=2)
+        st, pos = simulate_scenario(scn)
+        frame = render_scenario_frames(scn, st, pos)[0]
+        true = np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])[:, :2]
+        assert scn.lighting.body == "dark" and len(detect_blobs(frame)) == 2   # the case
+        seeds, _ = find_markers(frame, ball_reflections=2)
+        assert np.hypot(*(seeds - true).T).max() < 3.0, (seed, seeds, true)
+        with pytest.raises(MarkerError, match="--seeds"):
+            find_markers(frame, ball_reflections=1)              # one reflection: no fallback
+        # the ball replaced by the plane around it: no body, the finder refuses
+        x, y = np.rint(true[2]).astype(int)
+        erased = frame.copy()
+        ring = np.concatenate([frame[y - 12, x - 12:x + 13], frame[y + 12, x - 12:x + 13]])
+        erased[y - 10:y + 11, x - 10:x + 11] = np.median(ring)
+        noise = np.random.default_rng(seed).normal(0, frame[:20, :20].std(), (21, 21))
+        erased[y - 10:y + 11, x - 10:x + 11] = np.clip(
+            erased[y - 10:y + 11, x - 10:x + 11] + noise, 0, 255).astype(np.uint8)
+        assert ball_body(erased, [(b["x"], b["y"]) for b in detect_blobs(erased)[:2]]) is None
+        with pytest.raises(MarkerError, match="--seeds"):
+            find_markers(erased, ball_reflections=2)
