@@ -66,6 +66,9 @@ from twin.scenario import (random_scenario, render_scenario_frames,  # noqa: E40
 EXTRA_MEASURE_ARGS: list[str] = []
 #: Analysis options added to every ``abu measure``, also of kept tracks (``--lighting-models``).
 ANALYSIS_ARGS: list[str] = []
+#: ``--alt-seeds-given``: the second highlight model's recordings start from the true seeds
+#: (default: the marker finder's, the whole chain from the raw frames).
+ALT_SEEDS_GIVEN = False
 #: theta's harmonic prior without a camera file (the family prior).
 THETA_PRIOR_DEFAULT = InferenceOptions().theta_harmonic_rad
 
@@ -108,9 +111,9 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
         t1 = time.perf_counter()
     if refl == 2:
         args += ["--ball-reflections", "2"]
-    if lighting == "two_spot_alt":
-        # the marker finder was not extended to the second model's dark balls: the tracker
-        # starts from the true frame-0 positions (what a user gives with --seeds)
+    if lighting == "two_spot_alt" and ALT_SEEDS_GIVEN:
+        # --alt-seeds-given: the tracker starts from the true frame-0 positions (what a user
+        # gives with --seeds), as before the marker finder read the second model's dark balls
         from measurement.imaging.markers import format_seeds
         args += ["--seeds", format_seeds(np.stack([pos["centre"][0], pos["cd"][0],
                                                    pos["ball"][0]]))]
@@ -425,6 +428,9 @@ def main() -> None:
                          "analysis (no rendering) and print the figures")
     ap.add_argument("--lighting-models", choices=["one", "two"], default=None,
                     help="abu measure --lighting-models (default: its default, one)")
+    ap.add_argument("--alt-seeds-given", action="store_true",
+                    help="start the second highlight model's recordings from the true frame-0 "
+                         "positions (--seeds), not the marker finder's")
     ap.add_argument("--summarize", default=None,
                     help="only print the figures of an existing results.jsonl")
     args = ap.parse_args()
@@ -432,6 +438,8 @@ def main() -> None:
         EXTRA_MEASURE_ARGS.append("--edge-step" if args.edge_step else "--no-edge-step")
     if args.lighting_models:
         ANALYSIS_ARGS.extend(["--lighting-models", args.lighting_models])
+    global ALT_SEEDS_GIVEN
+    ALT_SEEDS_GIVEN = args.alt_seeds_given
     if args.summarize:
         rows = [json.loads(line) for line in open(args.summarize)]
         print(f"{len(rows)} recordings from {args.summarize}")

@@ -178,6 +178,62 @@ def _merge_reflections(blobs: list[dict], distance: float) -> list[dict]:
     return out
 
 
+#: The ball's body is taken as the third marker where it stands out of the frame's spread of
+#: the disk-averaged |frame - background| by this robust z (median, 1.4826 MAD) ...
+BODY_Z = 15.0
+#: ... and every other such disk stays below this share of it (an unambiguous ball).
+BODY_SECOND = 0.5
+
+
+def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float = 12.0
+              ) -> dict | None:
+    """The ball found by its body where its reflections are too faint to be a bright blob.
+
+    A brass ball under diffuse light mirrors dark surroundings: its body is darker than the
+    plane, its reflections small and dim (``twin.lighting_alt``: 20 % of the unseen two-spot
+    recordings of seeds 11000-11039 showed only the centre and CD markers as bright blobs).
+    Dark body or bright, the ball is where |frame - background| is large over a whole disk:
+    the Gaussian-smoothed frame minus its median background (as :func:`detect_blobs`), its
+    absolute value averaged over a disk of radius r_max / 2, the two markers found masked
+    (2 r_max around each). The peak is taken if it stands BODY_Z robust sigmas out of the
+    frame's own spread of that average and no other disk reaches BODY_SECOND of it (measured
+    on those recordings: the ball at z 32-91, the next disk at 4-7). Returns a candidate dict
+    (``body``: True) or None.
+    """
+    import cv2
+
+    f = cv2.GaussianBlur(np.asarray(frame).astype(np.float32), (0, 0), 1.0)
+    k = int(4 * r_max + 1) | 1
+    k_max = min(f.shape) if min(f.shape) % 2 else min(f.shape) - 1
+    k = max(3, min(k, k_max))
+    bg = cv2.medianBlur(np.clip(f, 0, 255).astype(np.uint8), k).astype(np.float32)
+    r = 0.5 * r_max
+    n = int(2 * r) + 3
+    yy, xx = np.mgrid[:n, :n] - (n - 1) / 2.0
+    disk = (np.hypot(xx, yy) <= r).astype(np.float32)
+    e = cv2.filter2D(np.abs(f - bg), -1, disk / disk.sum())
+    for x, y in known:
+        cv2.circle(e, (int(round(x)), int(round(y))), int(2 * r_max), 0.0, -1)
+    med = float(np.median(e))
+    mad = 1.4826 * float(np.median(np.abs(e - med)))
+    if not mad > 0:
+        return None
+    y0, x0 = np.unravel_index(int(np.argmax(e)), e.shape)
+    peak = (float(e[y0, x0]) - med) / mad
+    rest = e.copy()
+    cv2.circle(rest, (int(x0), int(y0)), int(2 * r_max), 0.0, -1)
+    second = (float(rest.max()) - med) / mad
+    if peak < BODY_Z or second > BODY_SECOND * peak:
+        return None
+    # the centre of the disk's energy about the peak (sub-pixel)
+    h = int(r) + 2
+    ys, xs = slice(max(0, y0 - h), y0 + h + 1), slice(max(0, x0 - h), x0 + h + 1)
+    w = np.maximum(e[ys, xs] - med, 0.0)
+    gy, gx = np.mgrid[ys, xs]
+    return {"x": float((w * gx).sum() / w.sum()), "y": float((w * gy).sum() / w.sum()),
+            "area": float(math.pi * r * r), "contrast": float(e[y0, x0]), "body": True}
+
+
 def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window: int = 30,
                  r_min: float = 2.0, r_max: float = 12.0, ball_reflections: int = 1
                  ) -> tuple[np.ndarray, list[str]]:
@@ -215,13 +271,17 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
         known = [(b["x"], b["y"]) for b in blobs]
         blobs += [b for b in candidates(0.1)
                   if all(math.hypot(b["x"] - x, b["y"] - y) > 2.0 * r_max for x, y in known)]
+    if len(blobs) == 2 and ball_reflections == 2 and not dark:
+        body = ball_body(img, [(b["x"], b["y"]) for b in blobs], r_max)
+        if body is not None:
+            blobs.append(body)
     hint = " Give the positions with --seeds 'x,y;x,y;x,y' (ABU centre; CD marker; ball) [px]."
     listing = "; ".join(f"({b['x']:.1f}, {b['y']:.1f}) contrast {b['contrast']:.0f}"
                         for b in blobs[:8])
     if len(blobs) != 3:
         raise MarkerError(f"found {len(blobs)} marker candidates, expected 3"
                           f"{': ' + listing if blobs else ''}.{hint}")
-    _refine(img, [b for b in blobs if not b.get("merged")], dark, window)
+    _refine(img, [b for b in blobs if not (b.get("merged") or b.get("body"))], dark, window)
     p = np.array([[b["x"], b["y"]] for b in blobs])
     d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
     if geometry is not None:

@@ -235,31 +235,54 @@ FOLLOW_FRAMES = 4
 
 
 def _follow_silhouette(frames: np.ndarray, seed: np.ndarray, geo, ws: int,
-                       opts: "T.TrackingOptions", radius_px: float
-                       ) -> tuple[np.ndarray, np.ndarray]:
+                       opts: "T.TrackingOptions", radius_px: float,
+                       guide: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(N, 1) x, y [px]: the silhouette followed from the seed, a few frames at a time, each
-    step's windows centred on the last good position (kept where a frame is lost)."""
+    step's windows centred on the predicted position (kept where a frame is lost).
+
+    ``guide`` (N, 2, 2): the ABU centre's and the CD marker's tracks [px] (NaN where lost).
+    The ball rides on the CD, so it is predicted frame by frame as c + k (cd - c), with k the
+    complex ratio (ball - c) / (cd - c) of the last good fit: k changes only as the ball slips
+    (slowly, against the CD's turning), so a faint ball is looked for where it must be, not
+    where noise fitted last. Without a guide (or where c or cd are lost): the last good
+    position, extrapolated linearly."""
     n = frames.shape[0]
     xs, ys = np.empty((n, 1)), np.empty((n, 1))
     px, py, k_last = float(seed[0]), float(seed[1]), 0
     vx = vy = 0.0                                  # [px/frame] from the last two good steps
+    zc = zd = None
+    k_ratio = None
+    if guide is not None:
+        zc = guide[:, 0, 0] + 1j * guide[:, 0, 1]
+        zd = guide[:, 1, 0] + 1j * guide[:, 1, 1]
+        if np.isfinite(zc[0]) and np.isfinite(zd[0]) and abs(zd[0] - zc[0]) > 0:
+            k_ratio = (px + 1j * py - zc[0]) / (zd[0] - zc[0])
     for start in range(0, n, FOLLOW_FRAMES):
         stop = min(n, start + FOLLOW_FRAMES)
         m = stop - start
         ahead = start + 0.5 * m - k_last             # frames from the last good one
-        qx, qy = px + vx * ahead, py + vy * ahead
-        X, Y, _, reason = _one_pass(frames[start:stop], np.full(m, qx), np.full(m, qy),
-                                    np.zeros(m, np.uint8), geo, ws, opts, "silhouette",
-                                    radius_px, False)
+        qx, qy = np.full(m, px + vx * ahead), np.full(m, py + vy * ahead)
+        if k_ratio is not None:
+            zq = zc[start:stop] + k_ratio * (zd[start:stop] - zc[start:stop])
+            known = np.isfinite(zq)
+            qx, qy = np.where(known, zq.real, qx), np.where(known, zq.imag, qy)
+        X, Y, _, reason = _one_pass(frames[start:stop], qx, qy, np.zeros(m, np.uint8), geo, ws,
+                                    opts, "silhouette", radius_px, False)
         ok = reason == T.OK
+        if k_ratio is not None:   # a fit far from where the ball must be is noise
+            ok &= np.hypot(X - qx, Y - qy) <= max(1.0, 0.5 * radius_px)
         xs[start:stop, 0] = np.where(ok, X, qx)
         ys[start:stop, 0] = np.where(ok, Y, qy)
         if ok.any():
-            k = start + int(np.flatnonzero(ok)[-1])
+            j = int(np.flatnonzero(ok)[-1])
+            k = start + j
             if k > k_last:
-                vx = (float(X[ok][-1]) - px) / (k - k_last) if start else 0.0
-                vy = (float(Y[ok][-1]) - py) / (k - k_last) if start else 0.0
-            px, py, k_last = float(X[ok][-1]), float(Y[ok][-1]), k
+                vx = (float(X[j]) - px) / (k - k_last) if start else 0.0
+                vy = (float(Y[j]) - py) / (k - k_last) if start else 0.0
+            px, py, k_last = float(X[j]), float(Y[j]), k
+            if zc is not None and np.isfinite(zc[k]) and np.isfinite(zd[k]) \
+                    and abs(zd[k] - zc[k]) > 0:
+                k_ratio = (px + 1j * py - zc[k]) / (zd[k] - zc[k])
     return xs, ys
 
 
@@ -290,32 +313,36 @@ def _passes(frames: np.ndarray, xs: np.ndarray, ys: np.ndarray, reason0: np.ndar
     return X, Y, R, reason
 
 
-def _silhouette_track(frames: np.ndarray, seed: np.ndarray, opts: "T.TrackingOptions"
+def _silhouette_track(frames: np.ndarray, seed: np.ndarray, opts: "T.TrackingOptions",
+                      guide: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The ``silhouette`` track, followed from the seed (the seeded centroid follows the
-    bright pixels, which on a dark ball with faint reflections are noise)."""
+    bright pixels, which on a dark ball with faint reflections are noise), guided by the
+    centre and CD tracks where given (:func:`_follow_silhouette`)."""
     radius_px = _estimate_radius(frames[0], seed, method="silhouette")
     ws = _ball_window(radius_px)
-    xs, ys = _follow_silhouette(frames, seed, W.WindowGeometry.make(ws), ws, opts, radius_px)
+    xs, ys = _follow_silhouette(frames, seed, W.WindowGeometry.make(ws), ws, opts, radius_px,
+                                guide)
     return _passes(frames, xs[:, 0], ys[:, 0], np.zeros(frames.shape[0], np.uint8), opts,
                    "silhouette", radius_px)
 
 
 def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
                radius_px: float | None = None, window: int = T.DEFAULT_WINDOW,
-               options: "T.TrackingOptions | None" = None
+               options: "T.TrackingOptions | None" = None, guide: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
     """Ball centre per frame under two reflections: x, y [px], radius/separation, reason and
     the method used. ``outline`` falls back to ``silhouette`` for the whole recording when it
     fails on most of the first :data:`PROBE_FRAMES` frames (a dark ball, large highlights) or
-    loses more than :data:`MAX_LOST_SHARE` of all frames and the silhouette loses fewer."""
+    loses more than :data:`MAX_LOST_SHARE` of all frames and the silhouette loses fewer.
+    ``guide``: the centre and CD tracks (N, 2, 2) [px] that guide the silhouette's windows."""
     if ball_method not in BALL_METHODS:
         raise ParameterError("--ball-method", ball_method, f"one of {', '.join(BALL_METHODS)}")
     opts = options or T.TrackingOptions()
     seed = np.asarray(seed, dtype=float).reshape(1, 2)
     frames, seed, window = T._check_inputs(frames, seed, window, "moments")
     if ball_method == "silhouette":
-        return (*_silhouette_track(frames, seed[0], opts), ball_method)
+        return (*_silhouette_track(frames, seed[0], opts, guide), ball_method)
     xs, ys, reason0 = T._seeded_moments(frames, seed, window, False, opts)
     if radius_px is None:
         radius_px = _estimate_radius(frames[0], seed[0])
@@ -325,11 +352,11 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
         probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0],
                           W.WindowGeometry.make(ws), ws, opts, "outline", radius_px, False)[3]
         if np.mean(probe != T.OK) > 0.5:
-            return (*_silhouette_track(frames, seed[0], opts), "silhouette")
+            return (*_silhouette_track(frames, seed[0], opts, guide), "silhouette")
     out = _passes(frames, xs[:, 0], ys[:, 0], reason0[:, 0], opts, ball_method, radius_px)
     lost = np.mean(out[3] != T.OK)
     if ball_method == "outline" and lost > MAX_LOST_SHARE:
-        alt = _silhouette_track(frames, seed[0], opts)
+        alt = _silhouette_track(frames, seed[0], opts, guide)
         if np.mean(alt[3] != T.OK) < lost:
             return (*alt, "silhouette")
     return (*out, ball_method)
@@ -373,8 +400,10 @@ def track_with_reflections(frames: np.ndarray, seeds: np.ndarray, *,
         raise T.TrackingError(f"seeds: expected 3 positions (centre, CD, ball), got {seeds.shape}")
     opts = options or T.TrackingOptions(edge_step=any(edge_step_default(2)))
     tr = T.track_recording(frames, seeds[:2], method=method, window=window, options=opts)
+    guide = np.stack([np.column_stack([tr.x[:, j], tr.y[:, j]]) for j in (0, 1)], axis=1)
     X, Y, R, reason, used = track_ball(frames, seeds[2], ball_method=ball_method,
-                                 radius_px=radius_px, window=window, options=opts)
+                                       radius_px=radius_px, window=window, options=opts,
+                                       guide=guide)
     Xa = np.column_stack([tr.x, X])
     Ya = np.column_stack([tr.y, Y])
     Ra = np.column_stack([tr.radius, R])
