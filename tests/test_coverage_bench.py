@@ -1,25 +1,15 @@
 """``benchmarks/bench_coverage.py``'s comparison with calibrated intervals: what "no miss by
 more than 2 %" asks of intervals of a given width, checked against simulated estimators whose
 intervals are calibrated (or conservative) by construction."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+from benchmark_module import benchmark_module
 
 
 @pytest.fixture(scope="module")
 def bench():
-    mp = pytest.MonkeyPatch()
-    mp.syspath_prepend(str(BENCHMARKS))    # as when the benchmark runs as a script
-    spec = importlib.util.spec_from_file_location("bench_coverage",
-                                                  BENCHMARKS / "bench_coverage.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    yield mod
-    mp.undo()
+    yield from benchmark_module("bench_coverage")
 
 
 def _intervals(rng, n, rel_sigma, inflate):

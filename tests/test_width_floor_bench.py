@@ -1,24 +1,14 @@
 """The row summaries of ``benchmarks/bench_width_floor.py`` (the rendering and analysis it runs are
 tested elsewhere): width ratios on the recordings where both sets are finite, coverage and miss
 counts, and the ``--camera`` table's ratios to both exact rows."""
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+from benchmark_module import benchmark_module
 
 
 @pytest.fixture(scope="module")
 def bench():
-    mp = pytest.MonkeyPatch()
-    mp.syspath_prepend(str(BENCHMARKS))    # as when the benchmark runs as a script
-    spec = importlib.util.spec_from_file_location("bench_width_floor",
-                                                  BENCHMARKS / "bench_width_floor.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    yield mod
-    mp.undo()
+    yield from benchmark_module("bench_width_floor")
 
 
 def _row(kind, mu, **bounds):
