@@ -13,6 +13,9 @@ reflection recordings with ``--ball-reflections 2`` as their ``meta.json`` says)
 * the acceleration bias at the slip: the estimator applied to the *true* theta (no noise) minus
   the true omega_dot at the first slip frame, against the recording's 1-sigma noise bar of
   omega_dot (and against noise + truncation bound);
+* what "no miss by more than 2 %" asks: the misses calibrated 95 % intervals of the reported
+  widths would make (mu's error Gaussian, sigma = half-width / 1.96), and the spread of mu's
+  position in the reported intervals (1 if calibrated, below 1 if conservative);
 * seconds per recording (render and measure apart);
 * with ``--camera``: per recording the chessboard views of its optics are rendered
   (``twin.calibration_target``), ``abu calibrate-camera`` fits the lens and ``abu
@@ -28,6 +31,8 @@ Run (one process, nice; the 220-recording run took 12 minutes on the shared mach
     nice python benchmarks/bench_coverage.py --n 200 --edge-step  # the edge step on every disk
     nice python benchmarks/bench_coverage.py --n 100 --first 2000 --two-spot 20 --alt-two-spot 40 \
         --out /tmp/cov_unseen   # an unseen slice, two-reflection recordings of both models
+                                # (all from the raw frames, the marker finder included;
+                                # --alt-seeds-given: the second model's from the true seeds)
     nice python benchmarks/bench_coverage.py --seeds 3054,3064 --two-spot 0 --out D --keep D
     python benchmarks/bench_coverage.py --reanalyse D   # the kept tracks, current analysis
     python benchmarks/bench_coverage.py --reanalyse D --lighting-models two   # both lighting
