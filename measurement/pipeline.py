@@ -377,9 +377,17 @@ def measure_tracks_file(path: str | Path, *, fps_hz: float | None = None,
                         l_m: float = DEFAULT_L_M, d_m: float = DEFAULT_D_M,
                         options: AnalysisOptions = AnalysisOptions(), camera=None,
                         camera_path: str | None = None,
-                        drive: dict[str, Any] | None = None) -> MeasureResult:
-    """Analyse a tracks CSV (the whole of ``abu measure --tracks INPUT``)."""
+                        drive: dict[str, Any] | None = None,
+                        ball_reflections: int | None = None) -> MeasureResult:
+    """Analyse a tracks CSV (the whole of ``abu measure --tracks INPUT``).
+
+    ``ball_reflections``: how the tracked ball looked (1 or 2; None: not known, as the CSV
+    does not say); it chooses the default lighting models (``AnalysisOptions``)."""
     raw = read_tracks(path, fps_hz=fps_hz)
+    if ball_reflections is not None:
+        if ball_reflections not in (1, 2):
+            raise ParameterError("ball_reflections", ball_reflections, "1 or 2")
+        raw = replace(raw, info={**raw.info, "ball_reflections": int(ball_reflections)})
     check_record_length(raw.time_s, str(path), options)
     return measure_tracks(fill_tracks(raw), l_m=l_m, d_m=d_m, options=options, camera=camera,
                           camera_path=camera_path, drive=drive)

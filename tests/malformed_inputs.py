@@ -328,9 +328,12 @@ def _option_cases(c: Corpus, good_tracks: Path) -> None:
           "--comm-step")
     c.add("options", ["simulate", "--overwrite"], "--overwrite")
     for opt, v in (("--seeds", "1,2;30,40;60,70"), ("--method", "moments"), ("--window", "20"),
-                   ("--ball-reflections", "2"), ("--dark-markers", None), ("--progress", None)):
+                   ("--ball-method", "pair"), ("--dark-markers", None), ("--progress", None)):
         c.add("options", ["measure", "--tracks", str(good_tracks), opt] + ([v] if v else [])
               + ["--out", "{out}"], opt)
+    # --ball-reflections says how the tracked ball looked: only 1 or 2
+    c.add("options", ["measure", "--tracks", str(good_tracks), "--ball-reflections", "3",
+                      "--out", "{out}"], "--ball-reflections")
     c.add("options", ["measure", "--tracks", str(good_tracks), "--poly-degree", "5", "--out",
                       "{out}"], "--poly-degree")
     c.add("options", ["measure", "--tracks", str(good_tracks), "--no-harmonic",

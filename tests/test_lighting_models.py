@@ -168,3 +168,32 @@ def test_bad_alternative_orders_are_refused_by_name():
         with pytest.raises(ParameterError, match="harmonic_orders_alternative"):
             AnalysisOptions(harmonic_orders_alternative=bad)
     assert AnalysisOptions(harmonic_orders_alternative=()).harmonic_orders_alternative == ()
+
+
+def test_measure_tracks_takes_the_ball_reflections_it_is_told(tmp_path, capsys):
+    """``abu measure --tracks`` cannot see how the ball looked: ``--ball-reflections 2`` tells
+    it (both lighting models, as for the recording); without it the CSV's tracks get one
+    model, and the summary says what it was told."""
+    import json
+
+    from abu.cli.main import main
+    from measurement.pipeline import MarkerTracks, write_tracks
+    from test_inference import scenario_tracks
+
+    times, x, y, ball, _ = scenario_tracks(11)
+    write_tracks(MarkerTracks(times, x, y, np.zeros(x.shape, bool), "synthetic", {},
+                              (256, 256)), tmp_path / "t")
+    csv = str(tmp_path / "t" / "tracks.csv")
+    common = ["--l", repr(ball.l), "--d", repr(ball.d), "--no-plots", "--json", "--quiet"]
+    assert main(["measure", "--tracks", csv, "--out", str(tmp_path / "a"), *common]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main(["measure", "--tracks", csv, "--out", str(tmp_path / "b"),
+                 "--ball-reflections", "2", *common]) == 0
+    told = json.loads(capsys.readouterr().out)
+    assert "ball_reflections" not in plain["input"]
+    assert "second_lighting_orders" not in plain["model_fit"]
+    assert told["input"]["ball_reflections"] == 2
+    assert told["model_fit"]["second_lighting_orders"] == [1, 2, 3, 4, 5, 6]
+    assert main(["measure", "--tracks", csv, "--out", str(tmp_path / "c"),
+                 "--ball-reflections", "1", *common]) == 0
+    assert "second_lighting_orders" not in json.loads(capsys.readouterr().out)["model_fit"]

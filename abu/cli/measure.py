@@ -17,7 +17,8 @@ from pathlib import Path
 from abu_model.atomic_io import atomic_write_text
 from abu_model.errors import AbuError, ParameterError
 from abu_model.json_text import dumps
-from abu.cli.common import (MAX_BINS, add_figure_format, add_overwrite, in_range, integer_range,
+from abu.cli.common import (MAX_BINS, add_figure_format, add_overwrite, given, in_range,
+                            integer_range,
                             log as _log)
 from abu.cli.output_tx import check_not_inside, output_folder
 
@@ -131,7 +132,10 @@ def cmd_measure(args: argparse.Namespace) -> int:
               "camera_path": getattr(args, "camera", None), "drive": drive}
     with output_folder(out, overwrite=args.overwrite) as tmp:
         if args.tracks:
-            result = measure_tracks_file(args.input, fps_hz=fps_opt, **common)
+            result = measure_tracks_file(
+                args.input, fps_hz=fps_opt, ball_reflections=(
+                    args.ball_reflections if given(args, "--ball-reflections") else None),
+                **common)
         else:
             result = measure_recording(args.input, fps_hz=fps_opt, tracking=settings,
                                        log=lambda text: _log(args, text), warn=_warn,
@@ -197,7 +201,9 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
                       help="isocontour: the contour's circle fit alone, without the edge step")
     p.add_argument("--ball-reflections", type=int, choices=[1, 2], default=1,
                    help="bright reflections on the ball: 1 (default; one marker at the ball) "
-                        "or 2 (the report's two-spot lighting, sec. 5.2)")
+                        "or 2 (the report's two-spot lighting, sec. 5.2); with abu measure "
+                        "--tracks: how the tracked ball looked (2: both lighting models by "
+                        "default)")
     p.add_argument("--ball-method", choices=["outline", "pair"], default="outline",
                    help="with --ball-reflections 2: outline (default; circle fit to the ball's "
                         "silhouette) or pair (the report's way: the mean of the reflections)")
@@ -251,7 +257,8 @@ def register(subparsers) -> None:
                    help="one: the lighting harmonics of orders 1-4 removed from beta; two: "
                         "also orders 1-6, and the union of both models' sets where they "
                         "disagree at the slip (a second inference, ~0.1 s); auto (default): "
-                        "two with --ball-reflections 2, one otherwise (and with --tracks)")
+                        "two with --ball-reflections 2 (with --tracks: as the tracked ball "
+                        "looked), one otherwise")
     p.add_argument("--mc-draws", type=int, default=0,
                    help="Monte Carlo draws of tracking noise through the running-max interval "
                         "(default 0: the model's profile likelihood is the uncertainty)")

@@ -71,7 +71,9 @@ RULES: tuple[Rule, ...] = (
     # track, measure
     ("track", lambda a: a.ball_reflections == 1, ("--ball-method",),
      "with --ball-reflections 1 (the ball method chooses between two reflections)"),
-    ("measure", lambda a: a.tracks, _TRACKING,
+    # with --tracks, --ball-reflections still says how the tracked ball looked (it chooses the
+    # default lighting models); the other tracking options only set up the tracker
+    ("measure", lambda a: a.tracks, tuple(o for o in _TRACKING if o != "--ball-reflections"),
      "with --tracks (the markers are already tracked; these options set up the tracker)"),
     ("measure", lambda a: not a.tracks and a.ball_reflections == 1, ("--ball-method",),
      "with --ball-reflections 1 (the ball method chooses between two reflections)"),
