@@ -192,11 +192,18 @@ def measure(recording: str | Path, *, fps_hz: float | None = None,
 
 def measure_tracks(tracks_csv: str | Path, *, l_m: float = DEFAULT_L_M,
                    d_m: float = DEFAULT_D_M, options: AnalysisOptions = AnalysisOptions(),
-                   camera: str | Path | None = None) -> MeasureResult:
-    """Analyse a tracks CSV (``abu measure --tracks``)."""
+                   camera: str | Path | None = None,
+                   ball_reflections: int | None = None) -> MeasureResult:
+    """Analyse a tracks CSV (``abu measure --tracks``).
+
+    Args:
+        ball_reflections: how the tracked ball looked (1 or 2; None: not stated, as the CSV
+            does not say); with 2 the default analysis keeps both lighting models.
+    """
     cam = _camera(camera)
     return measure_tracks_file(tracks_csv, l_m=l_m, d_m=d_m, options=options, camera=cam,
-                               camera_path=None if camera is None else str(camera))
+                               camera_path=None if camera is None else str(camera),
+                               ball_reflections=ball_reflections)
 
 
 def _camera(path: str | Path | None):

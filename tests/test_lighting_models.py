@@ -197,3 +197,10 @@ def test_measure_tracks_takes_the_ball_reflections_it_is_told(tmp_path, capsys):
     assert main(["measure", "--tracks", csv, "--out", str(tmp_path / "c"),
                  "--ball-reflections", "1", *common]) == 0
     assert "second_lighting_orders" not in json.loads(capsys.readouterr().out)["model_fit"]
+    from abu import api                       # the Python API says the same
+    res = api.measure_tracks(csv, l_m=ball.l, d_m=ball.d, ball_reflections=2)
+    assert (res.mu_low, res.mu_high) == (told["mu_low"], told["mu_high"])
+    import pytest
+    from abu_model.errors import ParameterError
+    with pytest.raises(ParameterError, match="ball_reflections"):
+        api.measure_tracks(csv, l_m=ball.l, d_m=ball.d, ball_reflections=3)
