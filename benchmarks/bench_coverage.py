@@ -205,7 +205,10 @@ def reanalyse(folder: Path, work: Path) -> list[dict]:
             status = abu_main(["measure", str(tracks), "--tracks", "--out", str(out),
                                "--overwrite", "--quiet", "--no-plots", "--l",
                                repr(float(st["l"])), "--d", repr(float(st["d"])),
-                               *ANALYSIS_ARGS])
+                               # how the tracked ball looked (the default lighting models
+                               # follow it, as when the recording was measured)
+                               *(["--ball-reflections", "2"] if row["reflections"] == 2
+                                 else []), *ANALYSIS_ARGS])
         keep.update({"measure_s": time.perf_counter() - t1, "exit": status})
         rows.append(measured_row(keep, status, err, out, st["times"], st))
         r = rows[-1]
@@ -432,7 +435,8 @@ def main() -> None:
                     help="a --keep folder: measure its kept tracks again with the current "
                          "analysis (no rendering) and print the figures")
     ap.add_argument("--lighting-models", choices=["one", "two"], default=None,
-                    help="abu measure --lighting-models (default: its default, one)")
+                    help="abu measure --lighting-models (default: its default, auto: two "
+                         "lighting models for two-reflection recordings)")
     ap.add_argument("--alt-seeds-given", action="store_true",
                     help="start the second highlight model's recordings from the true frame-0 "
                          "positions (--seeds), not the marker finder's")
