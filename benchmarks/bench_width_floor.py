@@ -102,6 +102,7 @@ from controller.profile import Profile, dumps_profile  # noqa: E402
 from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
+from measurement.inference.lighting_models import alternative_orders  # noqa: E402
 from measurement.imaging.camera import read_camera  # noqa: E402
 from measurement.pipeline import MarkerTracks, measure_tracks  # noqa: E402
 from twin.calibration_target import DEFAULT_VIEWS  # noqa: E402
@@ -195,14 +196,18 @@ def summary(scn, tracks, opt: AnalysisOptions, state: dict | None = None,
             camera=None) -> dict:
     """The summary of one analysis of ``tracks``: with the plant's exact kinematics where
     ``state`` is given; with ``camera`` (a calibrated lens) as ``abu measure --camera``
-    analyses them (``measure_tracks``: positions undistorted, the calibration's lens prior)."""
+    analyses them (``measure_tracks``: positions undistorted, the calibration's lens prior).
+    The lighting models follow the ball's reflections, as ``abu measure``'s default."""
+    refl = int(scn.lighting.reflections)
+    if opt.harmonic_orders_alternative is None:
+        opt = replace(opt, harmonic_orders_alternative=alternative_orders(refl))
     analysis._kinematics = exact_kinematics(state) if state is not None else MEASURED_KINEMATICS
     try:
         if camera is None:
             return analyse_tracks(tracks.time, tracks.x, tracks.y, l=scn.ball.l, d=scn.ball.d,
                                   lost=tracks.lost, options=opt)[1]
         marker_tracks = MarkerTracks(tracks.time, tracks.x, tracks.y, tracks.lost, "tracks.csv",
-                                     {}, (scn.width, scn.height))
+                                     {"ball_reflections": refl}, (scn.width, scn.height))
         return measure_tracks(marker_tracks, l_m=scn.ball.l, d_m=scn.ball.d, options=opt,
                               camera=camera, camera_path="camera.json").summary
     finally:
