@@ -67,7 +67,8 @@ t = T(); mt = pipeline.track_recording(rec_path, settings=pipeline.TrackingSetti
     ball_reflections=refl))
 pipe_track = T() - t
 from measurement.imaging.compression import detect
-t = T(); detect(rec.frames, rec.codec); out["compression check (its part of the pipeline)"] = T() - t
+t = T(); detect(rec.frames, rec.codec)
+out["compression check (its part of the pipeline)"] = T() - t
 
 # the analysis' parts: CPU time inside a few functions, by wrappers (no profiler)
 from measurement.inference import noise_models, profile_cache, infer_mu, running_max

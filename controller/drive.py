@@ -48,8 +48,9 @@ by name), nor ``bandwidth_rad_s`` of the PI models.
 
 Checked on load, each refusal naming the file and the field: every number finite and within
 its field's range (:data:`UPPER`; > 0 but for :data:`MAY_BE_ZERO`), every ``*_ci95`` a pair
-low <= high within that same range; an optional field given as ``null`` is absent; a PI loop must be stable: tau_motor
-< 2 zeta / omega_n (Routh-Hurwitz on its characteristic polynomial above).
+low <= high within that same range; an optional field given as ``null`` is absent; a PI loop
+must be stable: tau_motor < 2 zeta / omega_n (Routh-Hurwitz on its characteristic polynomial
+above).
 """
 from __future__ import annotations
 
