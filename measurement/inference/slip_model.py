@@ -4,9 +4,9 @@ Two implementations of one model and discretisation: a compiled kernel (``_slipc
 by ``pip install -e .``), one candidate row at a time (~10x less CPU time in an analysis,
 8.5-11x on seeds 1-3 of benchmarks/bench_slip_model.py), and the NumPy reference used where
 the kernel is not built, vectorised over candidates and time (integrating factor + cumulative
-sums; episodes of slip are looped, samples are not). They agree to rounding (the kernel takes the integrating factor
-from each episode's onset, the reference from the call's first column; <= 1e-13 of max |D|,
-tests/test_slip_kernel.py). Used by :mod:`measurement.inference.infer_mu` (the model-based
+sums; episodes of slip are looped, samples are not). They agree to rounding (the kernel
+takes the integrating factor from each episode's onset, the reference from the call's first
+column; <= 1e-13 of max |D|, tests/test_slip_kernel.py). Used by :mod:`measurement.inference.infer_mu` (the model-based
 confidence set) and :func:`measurement.inference.running_max.predicted_creep` (the report's
 creep lower bound).
 """
