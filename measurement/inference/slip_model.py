@@ -7,8 +7,8 @@ the kernel is not built, vectorised over candidates and time (integrating factor
 sums; episodes of slip are looped, samples are not). They agree to rounding (the kernel
 takes the integrating factor from each episode's onset, the reference from the call's first
 column; <= 1e-13 of max |D|, tests/test_slip_kernel.py). Used by
-:mod:`measurement.inference.infer_mu` (the model-based confidence set) and :func:`measurement.inference.running_max.predicted_creep` (the report's
-creep lower bound).
+:mod:`measurement.inference.infer_mu` (the model-based confidence set) and
+:func:`measurement.inference.running_max.predicted_creep` (the report's creep lower bound).
 """
 from __future__ import annotations
 
