@@ -50,6 +50,7 @@ import sys
 import tempfile
 import time
 from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -60,6 +61,7 @@ import numpy as np  # noqa: E402
 from abu.cli.main import main as abu_main  # noqa: E402
 from measurement.kinematics import estimators as kin_mod  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions  # noqa: E402
+from twin import lighting_alt  # noqa: E402
 from twin.calibration_target import DEFAULT_VIEWS  # noqa: E402
 from lens_calibration import calibrate  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
@@ -88,13 +90,28 @@ def theta_first_harmonic(times: np.ndarray, theta: np.ndarray, theta_true: np.nd
     return float(np.hypot(*coef[3:]))
 
 
+#: ``--faint-two-spot``: the second highlight model's ball faded towards the plane by a factor
+#: drawn in this range (twin.lighting_alt.faded): outlines 1-2 noise sigma above the plane.
+FAINT_FACTORS = (0.2, 0.6)
+
+
+def scenario(seed: int, size: int, lighting: str | None):
+    """The recording's scenario; ``two_spot_faint``: the second highlight model's, its ball
+    faded by a factor in :data:`FAINT_FACTORS` drawn from the seed."""
+    if lighting != "two_spot_faint":
+        return random_scenario(seed, size=size, lighting=lighting)
+    scn = random_scenario(seed, size=size, lighting="two_spot_alt")
+    factor = np.random.default_rng([seed, 0xFA17]).uniform(*FAINT_FACTORS)
+    return replace(scn, lighting=lighting_alt.faded(scn.lighting, float(factor)))
+
+
 def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
         keep: Path | None = None) -> dict:
     """Render and measure one recording; the row of the results table (``views`` > 0: with
     a camera calibrated on that many chessboard views, ``abu measure --camera``; ``keep``: a
     folder for the tracks and the true state, to re-analyse with ``--reanalyse``)."""
     t0 = time.perf_counter()
-    scn = random_scenario(seed, size=size, lighting=lighting)
+    scn = scenario(seed, size, lighting)
     state, pos = simulate_scenario(scn)
     frames = render_scenario_frames(scn, state, pos)
     rec = work / f"rec{seed}.npy"
@@ -116,7 +133,7 @@ def one(seed: int, work: Path, size: int, lighting: str | None, views: int = 0,
         t1 = time.perf_counter()
     if refl == 2:
         args += ["--ball-reflections", "2"]
-    if lighting == "two_spot_alt" and ALT_SEEDS_GIVEN:
+    if lighting in ("two_spot_alt", "two_spot_faint") and ALT_SEEDS_GIVEN:
         # --alt-seeds-given: the tracker starts from the true frame-0 positions (what a user
         # gives with --seeds), as before the marker finder read the second model's dark balls
         from measurement.imaging.markers import format_seeds
@@ -146,6 +163,7 @@ def measured_row(row: dict, status: int, err: io.StringIO, out: Path, times: np.
     row.update({k: s.get(k) for k in ("mu_low", "mu_high", "status", "mu_d_low", "mu_d_high",
                                       "confidence", "relative_width")})
     row["mu_d_hat"] = s.get("mu_d")
+    row["tracking_method"] = (s.get("input") or {}).get("method")
     mf = s.get("model_fit") or {}
     row["model_low"] = mf.get("mu_low", s.get("mu_low"))
     row["model_high"] = mf.get("mu_high", s.get("mu_high"))
@@ -290,6 +308,10 @@ def report(rows: list[dict], label: str) -> None:
           f"({len(rows) - len(ok)} refused or failed)")
     if not ok:
         return
+    methods = [r["tracking_method"] for r in ok if r.get("tracking_method")]
+    if any("+" in m for m in methods):   # the two-reflection tracker says how it read the ball
+        print("  ball tracked by: " + ", ".join(
+            f"{m.split('+')[-1]} {methods.count(m)}" for m in sorted(set(methods))))
     judged = [r for r in ok if "lighting_union" in r]
     if judged:
         print(f"  second lighting model's set computed (and joined) in "
@@ -414,6 +436,10 @@ def main() -> None:
     ap.add_argument("--alt-two-spot", type=int, default=0,
                     help="extra two-reflection recordings lit by the second highlight model "
                          "(twin.lighting_alt; seeds after the forced two-spot ones)")
+    ap.add_argument("--faint-two-spot", type=int, default=0,
+                    help="extra two-reflection recordings of the second highlight model with "
+                         "the ball faded towards the plane (twin.lighting_alt.faded, factor "
+                         f"{FAINT_FACTORS[0]}-{FAINT_FACTORS[1]}; seeds after the others)")
     ap.add_argument("--size", type=int, default=256, help="frame size [px]")
     ap.add_argument("--out", default=None, help="folder for results.jsonl (default: temp)")
     step = ap.add_mutually_exclusive_group()
@@ -477,6 +503,9 @@ def main() -> None:
                                              args.first + args.n + args.two_spot)]
     first_alt = args.first + args.n + args.two_spot
     forced += [(s, "two_spot_alt") for s in range(first_alt, first_alt + args.alt_two_spot)]
+    first_faint = first_alt + args.alt_two_spot
+    forced += [(s, "two_spot_faint") for s in range(first_faint,
+                                                   first_faint + args.faint_two_spot)]
     # interleave the forced two-reflection recordings (one after every few family ones), so
     # that an interrupted run still holds both kinds
     every = max(1, len(family) // max(1, len(forced)))
@@ -502,7 +531,8 @@ def main() -> None:
     seeds = args.seeds or f"{args.first}..{args.first + args.n - 1}"
     print(f"\nfamily: twin.scenario.random_scenario(seed), seeds {seeds} "
           f"(+{args.two_spot} forced two-spot, +{args.alt_two_spot} "
-          f"two-spot of the second highlight model), {args.size} px, "
+          f"two-spot of the second highlight model, +{args.faint_two_spot} of it faded), "
+          f"{args.size} px, "
           f"3072 frames at 4500 frames/s; confidence {rows[0].get('confidence')}; "
           + (f"camera calibrated on {args.views} chessboard views per recording (--camera)"
              if args.camera else "no camera calibration (family prior on theta's harmonic)")
@@ -512,9 +542,12 @@ def main() -> None:
     report([r for r in rows if r["reflections"] == 1], "one reflection (TL ring / stray)")
     report([r for r in rows if r["reflections"] == 2], "two reflections (--ball-reflections 2)")
     report([r for r in rows if r["reflections"] == 2 and r.get("forced_lighting")
-            != "two_spot_alt"], "two reflections, first highlight model (twin.lighting)")
+            not in ("two_spot_alt", "two_spot_faint")],
+           "two reflections, first highlight model (twin.lighting)")
     report([r for r in rows if r.get("forced_lighting") == "two_spot_alt"],
            "two reflections, second highlight model (twin.lighting_alt)")
+    report([r for r in rows if r.get("forced_lighting") == "two_spot_faint"],
+           "two reflections, second highlight model, faint ball (twin.lighting_alt.faded)")
     print(f"\nper-recording rows: {log}")
 
 

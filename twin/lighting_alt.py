@@ -100,6 +100,19 @@ def make_alt_lighting(rng: np.random.Generator) -> AltLightingSpec:
                            flicker=u(0.0, 0.05), flicker_phase=u(0, 2 * math.pi))
 
 
+def faded(spec: AltLightingSpec, factor: float) -> AltLightingSpec:
+    """The same lamps and ball with the ball's contrast to the plane scaled by ``factor``
+    (0-1]: body level, shading, limb and highlights drawn towards the plane's level. A faint
+    ball (a body close to the plane's grey, weak highlights) stands only 1-2 noise sigma above
+    the plane at its outline: the recordings the silhouette loses."""
+    if not 0.0 < factor <= 1.0:
+        raise ValueError(f"factor {factor!r}: expected 0 < factor <= 1")
+    from dataclasses import replace
+    return replace(spec, body_level=1.0 + (spec.body_level - 1.0) * factor,
+                   body_shade=spec.body_shade * factor, rim_dark=spec.rim_dark * factor,
+                   spot_gain=spec.spot_gain * factor)
+
+
 def plane_irradiance(spec: AltLightingSpec, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """Relative irradiance of the plane at world points X, Y [m]: 1 + a linear gradient."""
     gx, gy = spec.gradient
