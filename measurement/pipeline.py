@@ -146,20 +146,21 @@ class MeasureResult:
 
 # ------------------------------------------------------------------------------ tracking
 
-def _seeds(frame0: np.ndarray, settings: TrackingSettings,
+def _seeds(frames: np.ndarray, settings: TrackingSettings,
            log: Callable[[str], None] | None) -> tuple[np.ndarray, str]:
     """The three seeds [px] and how they were obtained."""
-    from measurement.imaging.markers import find_markers, format_seeds
+    from measurement.imaging.finder_stack import find_markers_stacked
+    from measurement.imaging.markers import format_seeds
 
     if settings.seeds_px is not None:
         return np.asarray(settings.seeds_px, dtype=float), "given by --seeds"
-    seeds, roles = find_markers(frame0, dark=settings.dark_markers,
-                                ball_reflections=settings.ball_reflections)
+    seeds, roles, how = find_markers_stacked(frames, dark=settings.dark_markers,
+                                             ball_reflections=settings.ball_reflections)
     if log is not None:
-        log("markers found in frame 0 (x, y px): " + ", ".join(
+        log(f"markers {how} (x, y px): " + ", ".join(
             f"{role} ({sx:.2f}, {sy:.2f})" for role, (sx, sy) in zip(roles, seeds)))
         log(f"  reuse or correct with --seeds '{format_seeds(seeds)}'")
-    return seeds, "found in frame 0"
+    return seeds, how
 
 
 def _check_seeds_inside(seeds: np.ndarray, width: int, height: int) -> None:
@@ -229,7 +230,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     if check is not None:
         check(time, None if fps_hz is not None else rate.source)
     try:
-        seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
+        seeds, seeds_note = _seeds(frames, settings, log)
     except MarkerError as exc:
         raise MarkerError(f"{rec.source}, frame 0: {exc}") from None
     h, w = frames.shape[1:]

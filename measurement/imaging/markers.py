@@ -185,8 +185,8 @@ BODY_Z = 15.0
 BODY_SECOND = 0.5
 
 
-def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float = 12.0
-              ) -> dict | None:
+def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float = 12.0,
+              background: np.ndarray | None = None) -> dict | None:
     """The ball found by its body where its reflections are too faint to be a bright blob.
 
     A brass ball under diffuse light mirrors dark surroundings: its body is darker than the
@@ -197,16 +197,21 @@ def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float 
     absolute value averaged over a disk of radius r_max / 2, the two markers found masked
     (2 r_max around each). The peak is taken if it stands BODY_Z robust sigmas out of the
     frame's own spread of that average and no other disk reaches BODY_SECOND of it (measured
-    on those recordings: the ball at z 32-91, the next disk at 4-7). Returns a candidate dict
-    (``body``: True) or None.
+    on those recordings: the ball at z 32-91, the next disk at 4-7). ``background``: the
+    scene without the ball [grey levels] where known (the record's temporal median,
+    :mod:`measurement.imaging.finder_stack`), instead of the frame's spatial median. Returns a
+    candidate dict (``body``: True) or None.
     """
     import cv2
 
     f = cv2.GaussianBlur(np.asarray(frame).astype(np.float32), (0, 0), 1.0)
-    k = int(4 * r_max + 1) | 1
-    k_max = min(f.shape) if min(f.shape) % 2 else min(f.shape) - 1
-    k = max(3, min(k, k_max))
-    bg = cv2.medianBlur(np.clip(f, 0, 255).astype(np.uint8), k).astype(np.float32)
+    if background is not None:
+        bg = cv2.GaussianBlur(np.asarray(background).astype(np.float32), (0, 0), 1.0)
+    else:
+        k = int(4 * r_max + 1) | 1
+        k_max = min(f.shape) if min(f.shape) % 2 else min(f.shape) - 1
+        k = max(3, min(k, k_max))
+        bg = cv2.medianBlur(np.clip(f, 0, 255).astype(np.uint8), k).astype(np.float32)
     r = 0.5 * r_max
     n = int(2 * r) + 3
     yy, xx = np.mgrid[:n, :n] - (n - 1) / 2.0
@@ -235,8 +240,8 @@ def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float 
 
 
 def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window: int = 30,
-                 r_min: float = 2.0, r_max: float = 12.0, ball_reflections: int = 1
-                 ) -> tuple[np.ndarray, list[str]]:
+                 r_min: float = 2.0, r_max: float = 12.0, ball_reflections: int = 1,
+                 background: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
     """Find the ABU centre, CD and ball markers in one frame (see the module doc for the rule).
 
     Args:
@@ -248,6 +253,8 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
         r_min, r_max: plausible marker radii [px].
         ball_reflections: 2 when the ball shows two reflections (two-spot lighting): candidates
             closer than 14 px are merged into one ball candidate at their mean.
+        background: the scene without the ball, for :func:`ball_body` (None: the frame's
+            spatial median).
 
     Returns:
         seeds (3, 2) [px] in the order centre, CD, ball, and the role names.
@@ -272,7 +279,7 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
         blobs += [b for b in candidates(0.1)
                   if all(math.hypot(b["x"] - x, b["y"] - y) > 2.0 * r_max for x, y in known)]
     if len(blobs) == 2 and ball_reflections == 2 and not dark:
-        body = ball_body(img, [(b["x"], b["y"]) for b in blobs], r_max)
+        body = ball_body(img, [(b["x"], b["y"]) for b in blobs], r_max, background)
         if body is not None:
             blobs.append(body)
     hint = " Give the positions with --seeds 'x,y;x,y;x,y' (ABU centre; CD marker; ball) [px]."

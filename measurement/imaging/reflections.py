@@ -38,6 +38,7 @@ import numpy as np
 from abu_model.errors import ParameterError
 
 from measurement.imaging import tracking as T
+from measurement.imaging.ball_template import ball_window as _ball_window, template_track
 from measurement.imaging.edge_step_roles import edge_step_default, track_by_step
 from measurement.imaging import window_fits as W
 from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
@@ -191,11 +192,6 @@ def _gradient_edge(H: np.ndarray, a: np.ndarray, b: np.ndarray, r: np.ndarray, n
     return out
 
 
-def _ball_window(radius_px: float) -> int:
-    """Window side for the ball [px]: the ball plus a ring of background for the plane."""
-    return int(2 * np.ceil(radius_px) + 10)
-
-
 def _refine(G: np.ndarray, geo, opts: "T.TrackingOptions", ball_method: str,
             radius_px: float, final: bool) -> tuple[np.ndarray, ...]:
     if ball_method == "pair":
@@ -315,16 +311,24 @@ def _passes(frames: np.ndarray, xs: np.ndarray, ys: np.ndarray, reason0: np.ndar
 
 def _silhouette_track(frames: np.ndarray, seed: np.ndarray, opts: "T.TrackingOptions",
                       guide: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
     """The ``silhouette`` track, followed from the seed (the seeded centroid follows the
     bright pixels, which on a dark ball with faint reflections are noise), guided by the
-    centre and CD tracks where given (:func:`_follow_silhouette`)."""
+    centre and CD tracks where given (:func:`_follow_silhouette`); where it loses more than
+    :data:`MAX_LOST_SHARE` of the frames, the ball against its own template
+    (:func:`ball_template.template_track`, method ``template``) if that loses fewer."""
     radius_px = _estimate_radius(frames[0], seed, method="silhouette")
     ws = _ball_window(radius_px)
     xs, ys = _follow_silhouette(frames, seed, W.WindowGeometry.make(ws), ws, opts, radius_px,
                                 guide)
-    return _passes(frames, xs[:, 0], ys[:, 0], np.zeros(frames.shape[0], np.uint8), opts,
-                   "silhouette", radius_px)
+    out = _passes(frames, xs[:, 0], ys[:, 0], np.zeros(frames.shape[0], np.uint8), opts,
+                  "silhouette", radius_px)
+    lost = np.mean(out[3] != T.OK)
+    if lost > MAX_LOST_SHARE and guide is not None:   # a faint ball: against its template
+        alt = template_track(frames, seed, guide, radius_px, opts)
+        if np.mean(alt[3] != T.OK) < lost:
+            return (*alt, "template")
+    return (*out, "silhouette")
 
 
 def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAULT_BALL_METHOD,
@@ -342,7 +346,7 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
     seed = np.asarray(seed, dtype=float).reshape(1, 2)
     frames, seed, window = T._check_inputs(frames, seed, window, "moments")
     if ball_method == "silhouette":
-        return (*_silhouette_track(frames, seed[0], opts, guide), ball_method)
+        return _silhouette_track(frames, seed[0], opts, guide)
     xs, ys, reason0 = T._seeded_moments(frames, seed, window, False, opts)
     if radius_px is None:
         radius_px = _estimate_radius(frames[0], seed[0])
@@ -352,13 +356,13 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
         probe = _one_pass(frames[:m], xs[:m, 0], ys[:m, 0], reason0[:m, 0],
                           W.WindowGeometry.make(ws), ws, opts, "outline", radius_px, False)[3]
         if np.mean(probe != T.OK) > 0.5:
-            return (*_silhouette_track(frames, seed[0], opts, guide), "silhouette")
+            return _silhouette_track(frames, seed[0], opts, guide)
     out = _passes(frames, xs[:, 0], ys[:, 0], reason0[:, 0], opts, ball_method, radius_px)
     lost = np.mean(out[3] != T.OK)
     if ball_method == "outline" and lost > MAX_LOST_SHARE:
         alt = _silhouette_track(frames, seed[0], opts, guide)
         if np.mean(alt[3] != T.OK) < lost:
-            return (*alt, "silhouette")
+            return alt
     return (*out, ball_method)
 
 
