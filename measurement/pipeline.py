@@ -216,6 +216,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     """
     from measurement.imaging.frame_rate import resolve_frame_rate
     from measurement.imaging.compression import detect
+    from measurement.imaging.defects import correct_defects
     from measurement.imaging.frames_io import read_recording
     from measurement.imaging.markers import format_seeds
     from measurement.imaging.reflections import track_markers
@@ -224,7 +225,9 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     rate = resolve_frame_rate(rec.fps_hz, rec.fps_source, fps_hz, source=rec.source,
                               option=fps_option, warn=_warn if warn is None else warn,
                               container_hz=rec.container_fps_hz)
-    frames = rec.frames
+    frames, defects = correct_defects(rec.frames)  # stuck pixels would capture a window
+    if len(defects) and log is not None:
+        log(f"replaced {len(defects)} defective (stuck) pixels by their neighbours' median")
     time = np.arange(len(rec)) / rate.fps_hz
     if check is not None:
         check(time, None if fps_hz is not None else rate.source)
@@ -257,6 +260,9 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             "lost_reasons": tracks.lost_summary(),
             "compression": detect(frames, rec.codec).summary(),
             "ball_reflections": int(settings.ball_reflections)}
+    if len(defects):  # only then: a recording without any keeps its summary as it was
+        info["defective_pixels"] = {"count": len(defects),
+                                    "first_xy_px": defects[:100, ::-1].tolist()}
     return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
 
 
