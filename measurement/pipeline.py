@@ -30,6 +30,7 @@ from measurement.inference.analysis import AnalysisOptions, analyse_tracks
 from measurement.inference.lighting_models import alternative_orders
 from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
+from measurement.imaging.window_fits import TOUCHES_EDGE
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
 #: The report's camera's frame rate [frames/s]: used nowhere as a default any more (a recording
@@ -225,12 +226,12 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     rate = resolve_frame_rate(rec.fps_hz, rec.fps_source, fps_hz, source=rec.source,
                               option=fps_option, warn=_warn if warn is None else warn,
                               container_hz=rec.container_fps_hz)
-    frames, defects = correct_defects(rec.frames)  # stuck pixels would capture a window
-    if len(defects) and log is not None:
-        log(f"replaced {len(defects)} defective (stuck) pixels by their neighbours' median")
     time = np.arange(len(rec)) / rate.fps_hz
     if check is not None:
         check(time, None if fps_hz is not None else rate.source)
+    frames, defects = correct_defects(rec.frames)  # stuck pixels would capture a window
+    if len(defects) and log is not None:
+        log(f"replaced {len(defects)} defective (stuck) pixels by their neighbours' median")
     try:
         seeds, seeds_note = _seeds(np.asarray(frames[0]), settings, log)
     except MarkerError as exc:
@@ -249,6 +250,10 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
         # Name the frame as the recording knows it (file name for a folder of frames).
         hint = ("; if the ball shows two reflections, use --ball-reflections 2"
                 if settings.ball_reflections == 1 and tracks.lost[:, 2].any() else "")
+        lost_codes = np.asarray(tracks.reason)[lost]  # markers wider than the window (a closer
+        if lost_codes.size and np.mean(lost_codes == TOUCHES_EDGE) > 0.5:  # camera's)
+            hint += (f"; most lost windows cut a blob at their edge: markers may be too large "
+                     f"for --window {tracks.window} px, try a larger one")
         raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: "
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
