@@ -30,7 +30,7 @@ from measurement.inference.analysis import AnalysisOptions, analyse_tracks
 from measurement.inference.lighting_models import alternative_orders
 from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
-from measurement.imaging.window_fits import TOUCHES_EDGE
+from measurement.imaging.lost_hints import lost_hint
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
 #: The report's camera's frame rate [frames/s]: used nowhere as a default any more (a recording
@@ -248,12 +248,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
         y = tracks_io.fill_lost(time, tracks.y, lost)
     except tracks_io.LostMarkerError as exc:
         # Name the frame as the recording knows it (file name for a folder of frames).
-        hint = ("; if the ball shows two reflections, use --ball-reflections 2"
-                if settings.ball_reflections == 1 and tracks.lost[:, 2].any() else "")
-        lost_codes = np.asarray(tracks.reason)[lost]  # markers wider than the window (a closer
-        if lost_codes.size and np.mean(lost_codes == TOUCHES_EDGE) > 0.5:  # camera's)
-            hint += (f"; most lost windows cut a blob at their edge: markers may be too large "
-                     f"for --window {tracks.window} px, try a larger one")
+        hint = lost_hint(tracks.reason, lost, seeds, tracks.window, settings.ball_reflections)
         raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: "
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
