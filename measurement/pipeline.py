@@ -30,6 +30,7 @@ from measurement.inference.analysis import AnalysisOptions, analyse_tracks
 from measurement.inference.lighting_models import alternative_orders
 from measurement.imaging.markers import MarkerError
 from measurement.imaging.track_checks import check_marker_geometry
+from measurement.imaging.lost_hints import lost_hint
 from measurement.kinematics.input_checks import check_motion_and_roles, check_sampling
 
 #: The report's camera's frame rate [frames/s]: used nowhere as a default any more (a recording
@@ -217,6 +218,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     """
     from measurement.imaging.frame_rate import resolve_frame_rate
     from measurement.imaging.compression import detect
+    from measurement.imaging.defects import correct_defects
     from measurement.imaging.frames_io import read_recording
     from measurement.imaging.markers import format_seeds
     from measurement.imaging.reflections import track_markers
@@ -225,10 +227,12 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     rate = resolve_frame_rate(rec.fps_hz, rec.fps_source, fps_hz, source=rec.source,
                               option=fps_option, warn=_warn if warn is None else warn,
                               container_hz=rec.container_fps_hz)
-    frames = rec.frames
     time = np.arange(len(rec)) / rate.fps_hz
     if check is not None:
         check(time, None if fps_hz is not None else rate.source)
+    frames, defects = correct_defects(rec.frames)  # stuck pixels would capture a window
+    if len(defects) and log is not None:
+        log(f"replaced {len(defects)} defective (stuck) pixels by their neighbours' median")
     try:
         seeds, seeds_note = _seeds(frames, settings, log)
     except MarkerError as exc:
@@ -245,8 +249,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
         y = tracks_io.fill_lost(time, tracks.y, lost)
     except tracks_io.LostMarkerError as exc:
         # Name the frame as the recording knows it (file name for a folder of frames).
-        hint = ("; if the ball shows two reflections, use --ball-reflections 2"
-                if settings.ball_reflections == 1 and tracks.lost[:, 2].any() else "")
+        hint = lost_hint(tracks.reason, lost, seeds, tracks.window, settings.ball_reflections)
         raise tracks_io.LostMarkerError(f"{rec.source}: {exc}; lost reasons: "
                                         f"{tracks.lost_summary()}{hint}") from None
     info = {"source": rec.source, "seeds_px": format_seeds(seeds), "seeds": seeds_note,
@@ -258,6 +261,9 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             "lost_reasons": tracks.lost_summary(),
             "compression": detect(frames, rec.codec).summary(),
             "ball_reflections": int(settings.ball_reflections)}
+    if len(defects):  # only then: a recording without any keeps its summary as it was
+        info["defective_pixels"] = {"count": len(defects),
+                                    "first_xy_px": defects[:100, ::-1].tolist()}
     return MarkerTracks(time, x, y, lost, rec.source, info, (int(w), int(h)))
 
 

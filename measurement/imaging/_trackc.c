@@ -118,8 +118,12 @@ static PyObject *seeded(PyObject *Py_UNUSED(self), PyObject *args)
                         } else {
                             cx = (double)x0 + (double)m10 / (double)m00;
                             cy = (double)y0 + (double)m01 / (double)m00;
+                            /* a jump: far from both the last good position and the
+                             * prediction (a fast marker moves more than max_jump a frame) */
                             double dx = cx - px[m], dy = cy - py[m];
-                            if (dx * dx + dy * dy > max_jump * max_jump) code = JUMP;
+                            double ex = cx - qx, ey = cy - qy;
+                            double j2 = max_jump * max_jump;
+                            if (dx * dx + dy * dy > j2 && ex * ex + ey * ey > j2) code = JUMP;
                         }
                     }
                 }

@@ -368,14 +368,20 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
 
 def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0,
                      method: str = "outline") -> float:
-    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window)."""
-    for ws in (24, 20, 16):
+    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window).
+
+    The family's balls (radius ~4-6 px) are fitted in the first windows; the larger ones,
+    tried only when those fail, take the ball of a camera with ~2x its magnification (radius
+    ~10 px): without them its radius fell back to ``default`` and every frame was lost."""
+    for ws, guesses in ((24, (default, 4.0, 6.0)), (20, (default, 4.0, 6.0)),
+                        (16, (default, 4.0, 6.0)), (32, (8.0, 11.0)), (44, (11.0, 14.0)),
+                        (56, (14.0, 18.0))):
         x0, y0 = int(round(seed[0])) - ws // 2, int(round(seed[1])) - ws // 2
         if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
             continue
         G = frame[None, y0:y0 + ws, x0:x0 + ws].astype(np.float32)
         geo = W.WindowGeometry.make(ws)
-        for guess in (default, 4.0, 6.0):
+        for guess in guesses:
             a, b, r, code = (refine_outline(G, geo, T.TrackingOptions(), guess)
                              if method == "outline" else
                              refine_silhouette(G, geo, T.TrackingOptions(), guess))

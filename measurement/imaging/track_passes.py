@@ -94,8 +94,9 @@ def _seeded_chunk_py(chunk: np.ndarray, state: np.ndarray, window: int, dark: bo
     for k in range(chunk.shape[0]):
         frame = chunk[k]
         for m in range(m_count):
-            x0 = int(round(px[m] + vx[m])) - half
-            y0 = int(round(py[m] + vy[m])) - half
+            qx, qy = px[m] + vx[m], py[m] + vy[m]  # the prediction
+            x0 = int(round(qx)) - half
+            y0 = int(round(qy)) - half
             code = OK
             if x0 < 0 or y0 < 0 or x0 + window > wid or y0 + window > hgt:
                 code = OUTSIDE
@@ -112,9 +113,12 @@ def _seeded_chunk_py(chunk: np.ndarray, state: np.ndarray, window: int, dark: bo
                     else:
                         cx = x0 + mom["m10"] / m00
                         cy = y0 + mom["m01"] / m00
-                        # against the last good position, not the prediction: one
-                        # disturbed frame must not make the next good one look like a jump
-                        if (cx - px[m]) ** 2 + (cy - py[m]) ** 2 > max_jump * max_jump:
+                        # a jump is far from both the last good position (one disturbed
+                        # frame must not make the next good one look like a jump) and the
+                        # prediction (a fast marker moves more than max_jump a frame)
+                        j2 = max_jump * max_jump
+                        if (cx - px[m]) ** 2 + (cy - py[m]) ** 2 > j2 \
+                                and (cx - qx) ** 2 + (cy - qy) ** 2 > j2:
                             code = JUMP
             reason[k, m] = code
             if code == OK:

@@ -191,7 +191,18 @@ def _post_checks(X: np.ndarray, Y: np.ndarray, R: np.ndarray, reason: np.ndarray
         has_prev = good & (prev >= 0)
         k = np.flatnonzero(has_prev)
         pk = prev[k]
-        jump = np.hypot(X[k, m] - X[pk, m], Y[k, m] - Y[pk, m]) > max_jump * (k - pk)
+        limit = max_jump * (k - pk)
+        jump = np.hypot(X[k, m] - X[pk, m], Y[k, m] - Y[pk, m]) > limit
+        # ... and from the position the good frame before predicts (the seeded pass's test):
+        # a marker faster than max_jump px/frame (a low frame rate) is no jump
+        ppk = prev[np.maximum(pk, 0)]
+        moving = jump & (ppk >= 0)
+        i = np.flatnonzero(moving)
+        a, b, c = k[i], pk[i], ppk[i]
+        steps = (a - b) / (b - c)
+        ex = X[a, m] - X[b, m] - steps * (X[b, m] - X[c, m])
+        ey = Y[a, m] - Y[b, m] - steps * (Y[b, m] - Y[c, m])
+        jump[i] = np.hypot(ex, ey) > limit[i]
         reason[k[jump], m] = JUMP
 
 

@@ -28,8 +28,10 @@ class TrackingOptions:
             still reject noise.
         radius_tolerance: largest deviation from the marker's median radius, as a fraction [-]
             (or 1 px, whichever is larger).
-        max_jump: largest displacement from the last good position of the marker [px];
-            None means window/3.
+        max_jump: largest displacement [px] from both the last good position of the marker
+            and the position its last displacement predicts (a marker moving faster than
+            max_jump px/frame, e.g. the CD marker at 1500 frames/s, is no jump); None means
+            window/3.
         max_residual: largest RMS distance of contour points from the fitted circle [px].
         min_points: fewest contour points for a circle fit [-].
         report_levels: contour levels of the ``report`` method as fractions of the window's
