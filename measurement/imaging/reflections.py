@@ -24,7 +24,9 @@ ball centre (``ball_method``):
   plane under diffuse light, highlights covering the body; the second highlight model
   :mod:`twin.lighting_alt`). ``outline`` falls back to it for the whole recording when it
   fails on most of the first frames or loses more than 2 % of them (then only if the
-  silhouette loses fewer), so recordings the outline reads keep their results.
+  silhouette loses fewer), so recordings the outline reads keep their results; where the
+  silhouette loses more than 2 %, a faint ball is placed against its own template
+  (:mod:`ball_template`).
 
 :func:`track_with_reflections` tracks the ABU centre and CD markers with the default tracker
 and the ball with one of these, returning ordinary :class:`tracking.Tracks` (3 markers). A
@@ -40,6 +42,7 @@ from abu_model.errors import ParameterError
 from measurement.imaging import tracking as T
 from measurement.imaging.ball_template import ball_window as _ball_window, template_track
 from measurement.imaging.edge_step_roles import edge_step_default, track_by_step
+from measurement.imaging.reflection_pair import refine_pair
 from measurement.imaging import window_fits as W
 from measurement.imaging.silhouette import _plane_corrected, refine_silhouette
 
@@ -51,50 +54,6 @@ LEVEL = 0.33
 EDGE_REFINE = True
 #: ... at each ray's half-way level ("local") or at its steepest point ("gradient").
 EDGE_MODE = "local"
-#: Reason code for a ball window without two separate reflections.
-NO_PAIR = T.FIT_FAILED
-
-
-def refine_pair(G: np.ndarray, geo, opts: "T.TrackingOptions"
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Report's way on windows G (K, w, w): mean of the two reflections' centroids.
-
-    Returns centre a, b (window coordinates) [px], separation of the reflections [px] (in
-    place of a radius) and reason codes.
-    """
-    K, w, _ = G.shape
-    H, noise = _plane_corrected(G, geo)
-    flat = H.reshape(K, w * w)
-    hi = flat.max(axis=1)
-    thr = 0.6 * hi
-    W = np.maximum(H - thr[:, None, None], 0.0).reshape(K, w * w)
-    yy, xx = np.divmod(np.arange(w * w), w)
-    m0 = W.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cx = (W @ xx) / m0
-        cy = (W @ yy) / m0
-        dx = xx[None, :] - cx[:, None]
-        dy = yy[None, :] - cy[:, None]
-        sxx = (W * dx * dx).sum(1) / m0
-        syy = (W * dy * dy).sum(1) / m0
-        sxy = (W * dx * dy).sum(1) / m0
-        ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)            # principal axis
-        proj = dx * np.cos(ang)[:, None] + dy * np.sin(ang)[:, None]
-        out = []
-        for side in (proj < 0, proj >= 0):
-            Ws = W * side
-            ms = Ws.sum(1)
-            out.append(((Ws @ xx) / ms, (Ws @ yy) / ms, ms))
-    (x1, y1, m1), (x2, y2, m2) = out
-    a, b = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
-    sep = np.hypot(x2 - x1, y2 - y1)
-    # each group must be a compact spot: its weighted spread well below the separation
-    reason = np.zeros(K, dtype=np.uint8)
-    bad = ~np.isfinite(a) | (m1 <= 0) | (m2 <= 0) | (sep < 1.5) | (sep > w / 2.0)
-    bad |= np.sqrt(np.abs(sxx + syy)) < 0.35 * sep            # one blob, not two
-    reason[bad] = NO_PAIR
-    reason[(hi < opts.min_contrast) | (hi < opts.min_snr * noise)] = T.LOW_CONTRAST
-    return a, b, sep, reason
 
 
 def refine_outline(G: np.ndarray, geo, opts: "T.TrackingOptions", radius_px: float,
@@ -287,8 +246,8 @@ def _follow_silhouette(frames: np.ndarray, seed: np.ndarray, geo, ws: int,
 PROBE_FRAMES = 64
 
 
-#: Share of lost frames above which an ``outline`` track is redone with the ``silhouette`` (the
-#: analysis interpolates at most 2 % of the frames).
+#: Lost share above which ``outline`` is redone with ``silhouette`` (the analysis interpolates
+#: at most 2 % of the frames), and ``silhouette`` against the template.
 MAX_LOST_SHARE = 0.02
 
 
@@ -368,14 +327,12 @@ def track_ball(frames: np.ndarray, seed: np.ndarray, *, ball_method: str = DEFAU
 
 def _estimate_radius(frame: np.ndarray, seed: np.ndarray, default: float = 5.0,
                      method: str = "outline") -> float:
-    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window).
-
-    The family's balls (radius ~4-6 px) are fitted in the first windows; the larger ones,
-    tried only when those fail, take the ball of a camera with ~2x its magnification (radius
-    ~10 px): without them its radius fell back to ``default`` and every frame was lost."""
-    for ws, guesses in ((24, (default, 4.0, 6.0)), (20, (default, 4.0, 6.0)),
-                        (16, (default, 4.0, 6.0)), (32, (8.0, 11.0)), (44, (11.0, 14.0)),
-                        (56, (14.0, 18.0))):
+    """The ball's image radius [px] from frame 0 (``method`` fit in a generous window): the
+    family's (~4-6 px) first, then larger ones (a camera with ~2x its magnification: ~10 px;
+    the ``default`` kept for those lost the ball in every frame)."""
+    family = (default, 4.0, 6.0)
+    for ws, guesses in ((24, family), (20, family), (16, family), (32, (8.0, 11.0)),
+                        (44, (11.0, 14.0)), (56, (14.0, 18.0))):
         x0, y0 = int(round(seed[0])) - ws // 2, int(round(seed[1])) - ws // 2
         if x0 < 0 or y0 < 0 or x0 + ws > frame.shape[1] or y0 + ws > frame.shape[0]:
             continue
