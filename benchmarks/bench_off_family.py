@@ -1,0 +1,180 @@
+"""``abu measure`` on recordings outside the family the other benchmarks draw.
+
+``bench_coverage.py`` renders ``twin.scenario.random_scenario(seed)``: 4500 frames/s, 3072
+frames, 256 px, 8-bit, a camera at ~0.3 mm/px. Real cameras differ, and so will independent
+checks. Each variant here renders the same scenarios with one thing changed (the frame rate,
+the record's length, the frame size, the magnification, the sample format or tone curve,
+stuck sensor pixels, the second highlight model) and runs ``abu measure`` with its default
+options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
+measured, intervals with both bounds holding the true mu, the median relative width, the
+refusals (their first words) and the median CPU time of ``abu measure`` (the process's, from
+``wait4``; the machine may be shared).
+
+    nice python benchmarks/bench_off_family.py --first 20000 --seeds 4 --jobs 2
+    nice python benchmarks/bench_off_family.py --variants fps1500,hotpix --seeds 8
+
+Seeds from 20000 on were drawn for this benchmark; nothing was tuned on them.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from multiprocessing import Pool
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+#: The family's record length [s] (3072 frames at 4500 frames/s).
+DUR_S = 3072 / 4500.0
+#: variant -> (random_scenario options, magnification, post-processing of the frames)
+VARIANTS = {
+    "base": ({}, None, None),
+    "fps1500": ({"fps": 1500.0, "n_frames": round(DUR_S * 1500)}, None, None),
+    "fps2500": ({"fps": 2500.0, "n_frames": round(DUR_S * 2500)}, None, None),
+    "fps8000": ({"fps": 8000.0, "n_frames": round(DUR_S * 8000)}, None, None),
+    "long6000": ({"n_frames": 6000}, None, None),
+    "size200": ({"size": 200}, None, None),
+    "size512": ({"size": 512}, None, None),
+    "zoom1.5": ({"size": 384}, 1.5, None),
+    "zoom2": ({"size": 512}, 2.0, None),
+    "u16x256": ({}, None, "x256"),
+    "gamma": ({}, None, "gamma"),
+    "dim": ({}, None, "dim"),
+    "noisy": ({}, None, "noisy"),
+    "hotpix": ({}, None, "hotpix"),
+    "deadpix": ({}, None, "deadpix"),
+    "alt": ({"lighting": "two_spot_alt"}, None, None),
+}
+
+
+def magnified(scn, zoom: float):
+    """The scenario seen by a camera ``zoom`` times closer (pixel size / zoom about the
+    frame's centre; the paper markers' image radii scale too)."""
+    c = (scn.width - 1) / 2.0
+    ax, ay = scn.axis_xy
+    o = scn.optics
+    return scn.with_(pixel_size=scn.pixel_size / zoom,
+                     axis_xy=(c + (ax - c) * zoom, c + (ay - c) * zoom),
+                     centre_radius_px=scn.centre_radius_px * zoom,
+                     cd_radius_px=scn.cd_radius_px * zoom,
+                     optics=replace(o, optical_centre=(c + (o.optical_centre[0] - c) * zoom,
+                                                       c + (o.optical_centre[1] - c) * zoom)))
+
+
+def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
+    """The frames as another camera or a defective sensor would give them."""
+    rng = np.random.default_rng(7)
+    h, w = frames.shape[1:]
+    if how == "x256":      # 16-bit file, the 8 bits in the high byte
+        return frames.astype(np.uint16) * 256
+    if how == "gamma":     # a display tone curve
+        return np.rint(255.0 * (frames / 255.0) ** (1 / 2.2)).astype(np.uint8)
+    if how == "dim":       # 0.4 of the exposure
+        return np.rint(frames * 0.4).astype(np.uint8)
+    if how == "noisy":     # +5 grey levels of white noise
+        return np.clip(np.rint(frames + rng.normal(0, 5.0, frames.shape)), 0, 255).astype(
+            np.uint8)
+    out = frames.copy()    # 30 pixels stuck at 255 (hot) or 0 (dead)
+    out[:, rng.integers(0, h, 30), rng.integers(0, w, 30)] = 255 if how == "hotpix" else 0
+    return out
+
+
+def run(job: tuple[str, int, str]) -> dict:
+    """Render one variant of one seed and measure it; the result row."""
+    import tifffile
+
+    from measurement.imaging.frame_rate import tiff_metadata
+    from twin.scenario import random_scenario, render_scenario_frames, scenario_meta, \
+        simulate_scenario
+
+    variant, seed, work = job
+    options, zoom, post = VARIANTS[variant]
+    row: dict = {"variant": variant, "seed": seed}
+    scn = random_scenario(seed, **options)
+    if zoom:
+        scn = magnified(scn, zoom)
+    state, pos = simulate_scenario(scn)
+    frames = render_scenario_frames(scn, state, pos)
+    if post:
+        frames = postprocess(frames, post)
+    meta = scenario_meta(scn, state, pos)
+    d = Path(work) / f"{variant}_{seed}"
+    d.mkdir(parents=True)
+    tifffile.imwrite(d / "frames.tif", frames, photometric="minisblack", contiguous=True,
+                     metadata=tiff_metadata(scn.fps, 0.0))
+    cmd = [sys.executable, "-m", "abu.cli.main", "measure", str(d / "frames.tif"), "--out",
+           str(d / "m"), "--no-plots", "--quiet"]
+    if int(meta["ball_reflections"]) == 2:
+        cmd += ["--ball-reflections", "2"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    err = p.stderr.read().decode(errors="replace")
+    _, status, usage = os.wait4(p.pid, 0)
+    row.update(mu=meta["mu"], exit=os.waitstatus_to_exitcode(status),
+               cpu_s=usage.ru_utime + usage.ru_stime)
+    summary = d / "m" / "summary.json"
+    s = json.loads(summary.read_text()) if row["exit"] == 0 else None
+    shutil.rmtree(d)   # a 512 px or 16-bit recording is 0.4-0.8 GB: one at a time on disk
+    if s is None:
+        row["error"] = (err.strip().splitlines() or ["?"])[-1]
+        return row
+    lo, hi = s.get("mu_low"), s.get("mu_high")
+    row.update(status=s.get("status"), mu_low=lo, mu_high=hi,
+               covered=(lo is None or lo <= meta["mu"]) and (hi is None or meta["mu"] <= hi))
+    if lo is not None and hi is not None:
+        row["width"] = (hi - lo) / (0.5 * (hi + lo))
+    return row
+
+
+def report(rows: list[dict]) -> None:
+    print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'covered':>8s} {'median width':>12s} "
+          f"{'CPU s':>6s}  refusals")
+    for v in VARIANTS:
+        rs = [r for r in rows if r["variant"] == v]
+        if not rs:
+            continue
+        ok = [r for r in rs if r["exit"] == 0]
+        widths = [r["width"] for r in ok if "width" in r]
+        refused = sorted({r["error"].split(":")[-1].strip()[:70] for r in rs if r["exit"]})
+        print(f"{v:10s} {len(rs):4d} {len(ok):8d} {sum(r['covered'] for r in ok):5d}/{len(ok):<2d} "
+              f"{100 * np.median(widths) if widths else float('nan'):11.1f}% "
+              f"{np.median([r['cpu_s'] for r in rs]):6.2f}  {'; '.join(refused)}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--first", type=int, default=20000, help="first seed")
+    ap.add_argument("--seeds", type=int, default=4, help="seeds per variant")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help=f"comma-separated, of: {', '.join(VARIANTS)}")
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes")
+    ap.add_argument("--out", default=None, help="write the rows as JSON lines here")
+    args = ap.parse_args()
+    variants = args.variants.split(",")
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        ap.error(f"--variants: unknown {', '.join(bad)}; expected some of {', '.join(VARIANTS)}")
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="bench_off_family_") as work:
+        jobs = [(v, s, work) for v in variants for s in range(args.first, args.first + args.seeds)]
+        with Pool(args.jobs, maxtasksperchild=1) as pool:
+            rows = pool.map(run, jobs, chunksize=1)
+    if args.out:
+        Path(args.out).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    print(f"seeds {args.first}-{args.first + args.seeds - 1} per variant; abu measure with its "
+          f"defaults; {time.perf_counter() - t0:.0f} s wall")
+    report(rows)
+
+
+if __name__ == "__main__":
+    main()
