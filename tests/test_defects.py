@@ -16,7 +16,8 @@ from twin.scenario import random_scenario, render_scenario_frames, simulate_scen
 
 def test_stuck_pixels_are_found_and_nothing_else():
     """A hot and a dead pixel beside a static blurred disk of 2.5 px radius (smaller than any
-    marker) and a moving one: exactly the two are found, and replaced by the background."""
+    marker) and a moving one: exactly the two are found, and replaced by the background; so
+    are a pair and a column of three."""
     n = 40
     moving = np.stack([30.0 + 0.8 * np.arange(n), np.full(n, 45.0)], axis=1)
     true = np.stack([np.tile([20.0, 20.0], (n, 1)), moving], axis=1)
@@ -27,6 +28,13 @@ def test_stuck_pixels_are_found_and_nothing_else():
     frames[:, 58, 10] = 0
     found = find_defects(frames)
     assert sorted(map(tuple, found.tolist())) == [(10, 40), (58, 10)]
+    # side by side (a pair, a column of three), each hid the other from a max/min rule
+    clustered = frames.copy()
+    clustered[:, 30:32, 60] = 255
+    clustered[:, 50:53, 30] = 0
+    assert sorted(map(tuple, find_defects(clustered).tolist())) == [
+        (10, 40), (30, 60), (31, 60), (50, 30), (51, 30), (52, 30), (58, 10)]
+    assert np.abs(correct_defects(clustered)[0][:, 30:32, 60].astype(float) - 60.0).max() < 15
     fixed, where = correct_defects(frames)
     assert abs(float(np.mean(fixed[:, 10, 40])) - 60.0) < 5.0
     assert abs(float(np.mean(fixed[:, 58, 10])) - 60.0) < 5.0
