@@ -553,6 +553,20 @@ def _faint_recording(seed: int, factor: float, n: int = 600):
     return frames, np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])[:, :2]
 
 
+def test_the_template_without_a_guide_places_nothing():
+    """Centre or CD lost in frame 0: the template tracker returns every frame lost (the
+    silhouette's track stands), no exception."""
+    from measurement.imaging.ball_template import template_track
+    from measurement.imaging.tracking import TrackingOptions
+
+    frames = np.full((40, 64, 64), 50, np.uint8)
+    guide = np.full((40, 2, 2), 20.0)
+    guide[0, 1] = np.nan
+    x, y, r, reason = template_track(frames, np.array([30.0, 30.0]), guide, 5.0,
+                                     TrackingOptions())
+    assert np.isnan(x).all() and (reason != 0).all()
+
+
 def test_the_finder_turns_the_first_frames_back_for_a_faint_ball():
     """A ball faded to a quarter of its contrast (unseen seeds) is no blob in frame 0 and its
     body stands below the finder's threshold there; the first 32 frames turned back onto

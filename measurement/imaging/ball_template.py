@@ -233,8 +233,10 @@ def template_track(frames: np.ndarray, seed: np.ndarray, guide: np.ndarray, radi
     zc = guide[:, 0, 0] + 1j * guide[:, 0, 1]
     zd = guide[:, 1, 0] + 1j * guide[:, 1, 1]
     known = np.isfinite(zc) & np.isfinite(zd) & (np.abs(zd - zc) > 0)
-    if not known[0]:
-        raise ValueError("the template tracker needs the centre and CD markers in frame 0")
+    X, Y, R = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    reason = np.full(n, W.FIT_FAILED, np.uint8)
+    if not known[0]:   # no guide in frame 0: nothing placed (the silhouette's track stands)
+        return X, Y, R, reason
     # where the centre or CD is lost the guide is interpolated (the analysis refuses a
     # track with more than a few lost frames in a row anyway)
     idx = np.flatnonzero(known)
@@ -243,8 +245,6 @@ def template_track(frames: np.ndarray, seed: np.ndarray, guide: np.ndarray, radi
     zd = np.interp(ar, idx, zd.real[idx]) + 1j * np.interp(ar, idx, zd.imag[idx])
     k = np.full(n, (complex(seed[0], seed[1]) - zc[0]) / (zd[0] - zc[0]))
     ok = np.zeros(n, bool)
-    X, Y, R = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    reason = np.full(n, W.FIT_FAILED, np.uint8)
     first = min(n, STACK_FRAMES)
     radius = template_radius(frames[:first], *_guided(zc[:first], zd[:first], k[:first]),
                              radius_px, opts)
