@@ -80,6 +80,16 @@ def template_radius(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, radius_p
     return None
 
 
+def _bilinear(G: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+    """(K, w, w) windows at fractional offsets (fx, fy) in [0, 1) (K,) [px] into the
+    (K, w + 1, w + 1) windows G, by bilinear interpolation."""
+    fx = np.asarray(fx, np.float32)[:, None, None]
+    fy = np.asarray(fy, np.float32)[:, None, None]
+    top = (1 - fx) * G[:, :-1, :-1] + fx * G[:, :-1, 1:]
+    bottom = (1 - fx) * G[:, 1:, :-1] + fx * G[:, 1:, 1:]
+    return (1 - fy) * top + fy * bottom
+
+
 def subpixel_windows(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, ws: int
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(N, ws, ws) float32 windows centred on (cx, cy) [px] (bilinear), and whether each
@@ -92,11 +102,19 @@ def subpixel_windows(frames: np.ndarray, cx: np.ndarray, cy: np.ndarray, ws: int
     inside = (ix >= 0) & (iy >= 0) & (ix + ws + 1 <= wid) & (iy + ws + 1 <= hgt)
     ixc, iyc = np.clip(ix, 0, wid - ws - 1), np.clip(iy, 0, hgt - ws - 1)
     G = W.gather(frames, np.arange(n), ixc, iyc, ws + 1).astype(np.float32)
-    fx = np.where(inside, x0 - ix, 0.0).astype(np.float32)[:, None, None]
-    fy = np.where(inside, y0 - iy, 0.0).astype(np.float32)[:, None, None]
-    top = (1 - fx) * G[:, :-1, :-1] + fx * G[:, :-1, 1:]
-    bottom = (1 - fx) * G[:, 1:, :-1] + fx * G[:, 1:, 1:]
-    return (1 - fy) * top + fy * bottom, inside
+    return _bilinear(G, np.where(inside, x0 - ix, 0.0), np.where(inside, y0 - iy, 0.0)), inside
+
+
+def _shifted(T: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """T(x - d) per window (K, w, w), shifts d (K, 2) [px] clipped to half a window, the
+    edges repeated beyond the window (bilinear, as :func:`subpixel_windows`)."""
+    K, w, _ = T.shape
+    pad = w // 2 + 1
+    s = np.clip(-np.asarray(d, float), -(w // 2), w // 2)   # sample at x + s
+    ix, iy = np.floor(s[:, 0]).astype(np.int64), np.floor(s[:, 1]).astype(np.int64)
+    P = np.pad(T, ((0, 0), (pad, pad), (pad, pad)), mode="edge")
+    G = W.gather(P, np.arange(K), pad + ix, pad + iy, w + 1)
+    return _bilinear(G, s[:, 0] - ix, s[:, 1] - iy)
 
 
 def leave_one_out_means(H: np.ndarray, size: int) -> np.ndarray:
@@ -113,43 +131,30 @@ def leave_one_out_means(H: np.ndarray, size: int) -> np.ndarray:
 
 
 def _shift(Hk: np.ndarray, Tk: np.ndarray, mask: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           ) -> tuple[np.ndarray, np.ndarray]:
     """Shift d (dx, dy) [px] with template(x - d) + offset ~ window, by Gauss-Newton on the
-    pixels of ``mask``; returns d (K, 2), its standard error (K,) [px] and the offset."""
+    pixels of ``mask``; returns d (K, 2) and its standard error (K,) [px] (inf where the
+    template has no gradient)."""
     K = Hk.shape[0]
     d = np.zeros((K, 2))
-    se = np.full(K, np.inf)
     for _ in range(SHIFT_STEPS):
-        Ts = _bilinear_shift(Tk, d)
+        Ts = _shifted(Tk, d)
         gy, gx = np.gradient(Ts, axis=(1, 2))
         # model: Ts - gx ddx - gy ddy + b; unknowns (ddx, ddy, b)
         J = np.stack([-gx[:, mask], -gy[:, mask], np.ones_like(gx[:, mask])], axis=2)
         r = (Hk - Ts)[:, mask]
         JtJ = np.einsum("kpi,kpj->kij", J, J)
-        Jtr = np.einsum("kpi,kp->ki", J, r)
         ok = np.linalg.det(JtJ) > 0
         step = np.zeros((K, 3))
-        step[ok] = np.linalg.solve(JtJ[ok], Jtr[ok][..., None])[..., 0]
+        step[ok] = np.linalg.solve(JtJ[ok], np.einsum("kpi,kp->ki", J, r)[ok][..., None])[..., 0]
         d += step[:, :2]
-        res = r - np.einsum("kpi,ki->kp", J, step)
-        s2 = (res * res).sum(axis=1) / max(int(mask.sum()) - 3, 1)
-        cov = np.full((K, 3, 3), np.inf)
-        cov[ok] = np.linalg.inv(JtJ[ok]) * s2[ok, None, None]
-        se = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
-    return d, se, step[:, 2]
-
-
-def _bilinear_shift(T: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """T(x - d) by bilinear interpolation (edges repeated), per frame."""
-    K, w, _ = T.shape
-    yy, xx = np.mgrid[0:w, 0:w].astype(np.float64)
-    X = np.clip(xx[None] - d[:, 0, None, None], 0, w - 1.001)
-    Y = np.clip(yy[None] - d[:, 1, None, None], 0, w - 1.001)
-    ix, iy = np.floor(X).astype(np.int64), np.floor(Y).astype(np.int64)
-    fx, fy = X - ix, Y - iy
-    kk = np.arange(K)[:, None, None]
-    return ((1 - fy) * ((1 - fx) * T[kk, iy, ix] + fx * T[kk, iy, ix + 1])
-            + fy * ((1 - fx) * T[kk, iy + 1, ix] + fx * T[kk, iy + 1, ix + 1]))
+    # the standard error of the last step's linearisation, scaled by its residual
+    res = r - np.einsum("kpi,ki->kp", J, step)
+    s2 = (res * res).sum(axis=1) / max(int(mask.sum()) - 3, 1)
+    se = np.full(K, np.inf)
+    inv = np.linalg.inv(JtJ[ok])
+    se[ok] = np.sqrt((inv[:, 0, 0] + inv[:, 1, 1]) * s2[ok])
+    return d, se
 
 
 def _guided(zc: np.ndarray, zd: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -201,7 +206,7 @@ def _place(frames: np.ndarray, frame_idx: np.ndarray, cx: np.ndarray, cy: np.nda
         yy, xx = np.mgrid[0:ws, 0:ws]
         mask = np.hypot(xx - float(np.median(a[good])), yy - float(np.median(b[good]))) \
             <= min(radius_px + 2.5, h - 1.0)
-        d, se, _ = _shift(H, Tm, mask)
+        d, se = _shift(H, Tm, mask)
         X, Y = cx - h + a + d[:, 0], cy - h + b + d[:, 1]
         good &= inside & np.isfinite(X) & np.isfinite(Y) & (se <= MAX_SHIFT_SE_PX)
         good &= np.hypot(d[:, 0], d[:, 1]) <= max(MAX_SHIFT_PX, 0.5 * radius_px)
