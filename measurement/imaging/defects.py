@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from measurement.imaging.static_scene import static_scene
+
 #: Frames whose per-pixel median the defects are found on [-] (~11 ms of CPU for 256x256 px;
 #: a moving marker covers a pixel in far fewer than half of them).
 SAMPLE_FRAMES = 15
@@ -41,8 +43,7 @@ def find_defects(frames: np.ndarray) -> np.ndarray:
     n, h, w = frames.shape
     if h < 3 or w < 3:
         return np.zeros((0, 2), dtype=np.int64)
-    idx = np.unique(np.linspace(0, n - 1, min(n, SAMPLE_FRAMES)).round().astype(np.int64))
-    med = np.median(np.asarray(frames[idx]), axis=0).astype(np.int16)
+    med = static_scene(frames, SAMPLE_FRAMES).astype(np.int16)
     core = med[1:-1, 1:-1]
     around = np.stack([med[1 + dy:h - 1 + dy, 1 + dx:w - 1 + dx] for dy, dx in _NEIGHBOURS])
     ranked = np.sort(around, axis=0)

@@ -19,9 +19,12 @@ import numpy as np
 
 from measurement.imaging import markers as M
 from measurement.imaging import tracking as T
+from measurement.imaging.static_scene import static_scene
 
 #: Frames averaged (7 ms at 4500 frames/s: the ball is stuck at the start of a record).
 STACK_FRAMES = 32
+#: Frames, spread over the record, whose median is the scene without the ball.
+SCENE_FRAMES = 63
 
 
 def derotated_mean(frames: np.ndarray, centre: np.ndarray, cd: np.ndarray) -> np.ndarray:
@@ -67,7 +70,7 @@ def find_markers_stacked(frames: np.ndarray, *, dark: bool = False, ball_reflect
         stack = np.asarray(frames[:k])
         mean = np.clip(np.rint(derotated_mean(stack, centre, cd)), 0, 255).astype(np.uint8)
         # the scene without the ball, turned as the frames were: the ball is what moves
-        still = np.broadcast_to(static_scene(frames), stack.shape)
+        still = np.broadcast_to(static_scene(frames, SCENE_FRAMES), stack.shape)
         try:
             seeds, roles = M.find_markers(mean, ball_reflections=2,
                                           background=derotated_mean(still, centre, cd))
@@ -76,23 +79,10 @@ def find_markers_stacked(frames: np.ndarray, *, dark: bool = False, ball_reflect
         return seeds, roles, f"found in the first {k} frames turned back onto frame 0"
 
 
-#: Frames, spread over the record, whose median is the scene without the ball.
-SCENE_FRAMES = 63
-
-
-def static_scene(frames: np.ndarray) -> np.ndarray:
-    """The record's temporal median over :data:`SCENE_FRAMES` frames spread over it [grey
-    levels]: the plane, the lamps' gradient and the centre marker, without what moves (the
-    ball turns several times in a record, so it sits at any pixel in few of them; so does the
-    CD marker)."""
-    idx = np.unique(np.linspace(0, frames.shape[0] - 1, SCENE_FRAMES).round().astype(int))
-    return np.median(np.asarray(frames[idx], np.float32), axis=0)
-
-
 def _centre_and_cd(frame: np.ndarray) -> np.ndarray | None:
     """(2, 2) [px]: the ABU centre (nearest the image centre) and the CD marker, where frame 0
     shows exactly two bright candidates; else None."""
-    blobs = M._merge_reflections(M.detect_blobs(frame, fraction=0.25), 14.0)
+    blobs = M.bright_candidates(frame, ball_reflections=2)
     if len(blobs) != 2:
         return None
     p = np.array([[b["x"], b["y"]] for b in blobs])

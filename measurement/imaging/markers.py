@@ -178,6 +178,15 @@ def _merge_reflections(blobs: list[dict], distance: float) -> list[dict]:
     return out
 
 
+def bright_candidates(frame: np.ndarray, *, dark: bool = False, r_min: float = 2.0,
+                      r_max: float = 12.0, ball_reflections: int = 1, fraction: float = 0.25
+                      ) -> list[dict]:
+    """The marker candidates of :func:`detect_blobs`, a ball's two reflections (closer than
+    14 px, with ``ball_reflections`` 2) merged into one candidate at their mean."""
+    found = detect_blobs(frame, dark=dark, r_min=r_min, r_max=r_max, fraction=fraction)
+    return _merge_reflections(found, 14.0) if ball_reflections == 2 else found
+
+
 #: The ball's body is taken as the third marker where it stands out of the frame's spread of
 #: the disk-averaged |frame - background| by this robust z (median, 1.4826 MAD) ...
 BODY_Z = 15.0
@@ -266,8 +275,8 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
     img = np.asarray(frame)
 
     def candidates(fraction: float) -> list[dict]:
-        found = detect_blobs(img, dark=dark, r_min=r_min, r_max=r_max, fraction=fraction)
-        return _merge_reflections(found, 14.0) if ball_reflections == 2 else found
+        return bright_candidates(img, dark=dark, r_min=r_min, r_max=r_max,
+                                 ball_reflections=ball_reflections, fraction=fraction)
 
     blobs = candidates(0.25)
     if len(blobs) < 3:
