@@ -44,7 +44,8 @@ from measurement.imaging import window_fits as W
 #: frames/s are 14 ms, in which the outline does not change (the highlights move with the
 #: ball's place under the lamps: slowly, a bias like the lighting leftover); the template's
 #: noise is 1/8 of a frame's. With 33 a ball faded to a fifth of its contrast (bench_coverage
-#: --faint-two-spot, seed 30001) was lost in every frame from its true seed, with 65 in 1 %.
+#: --faint-two-spot, seed 30001) was lost in every frame from its true seed, with 65 in 1 %
+#: (a one-off; the faint slices quoted in the README were run with 65).
 STACK_FRAMES = 65
 #: Largest accepted shift of a frame against its template [px] (or half the radius): the
 #: windows are centred on the ball's predicted position.
