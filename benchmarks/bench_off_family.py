@@ -6,7 +6,8 @@ checks. Each variant here renders the same scenarios with one thing changed (the
 the record's length, the frame size, the magnification, the sample format or tone curve,
 stuck sensor pixels, the second highlight model) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
-measured, intervals with both bounds holding the true mu, the median relative width, the
+measured, measured with a null bound, intervals with both bounds holding the true mu (of
+those with both), the median relative width, the
 refusals (their first words) and the median CPU time of ``abu measure`` (the process's, from
 ``wait4``; the machine may be shared).
 
@@ -129,24 +130,25 @@ def run(job: tuple[str, int, str]) -> dict:
         row["error"] = (err.strip().splitlines() or ["?"])[-1]
         return row
     lo, hi = s.get("mu_low"), s.get("mu_high")
-    row.update(status=s.get("status"), mu_low=lo, mu_high=hi,
-               covered=(lo is None or lo <= meta["mu"]) and (hi is None or meta["mu"] <= hi))
-    if lo is not None and hi is not None:
-        row["width"] = (hi - lo) / (0.5 * (hi + lo))
+    row.update(status=s.get("status"), mu_low=lo, mu_high=hi)
+    if lo is not None and hi is not None:   # a null bound is counted apart, never as a hit
+        row.update(covered=lo <= meta["mu"] <= hi, width=(hi - lo) / (0.5 * (hi + lo)))
     return row
 
 
 def report(rows: list[dict]) -> None:
-    print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'covered':>8s} {'median width':>12s} "
-          f"{'CPU s':>6s}  refusals")
+    print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'null bound':>10s} {'covered':>8s} "
+          f"{'median width':>12s} {'CPU s':>6s}  refusals")
     for v in VARIANTS:
         rs = [r for r in rows if r["variant"] == v]
         if not rs:
             continue
         ok = [r for r in rs if r["exit"] == 0]
-        widths = [r["width"] for r in ok if "width" in r]
+        both = [r for r in ok if "width" in r]     # both bounds finite
+        widths = [r["width"] for r in both]
         refused = sorted({r["error"].split(":")[-1].strip()[:70] for r in rs if r["exit"]})
-        print(f"{v:10s} {len(rs):4d} {len(ok):8d} {sum(r['covered'] for r in ok):5d}/{len(ok):<2d} "
+        print(f"{v:10s} {len(rs):4d} {len(ok):8d} {len(ok) - len(both):10d} "
+              f"{sum(r['covered'] for r in both):5d}/{len(both):<2d} "
               f"{100 * np.median(widths) if widths else float('nan'):11.1f}% "
               f"{np.median([r['cpu_s'] for r in rs]):6.2f}  {'; '.join(refused)}")
 
@@ -160,6 +162,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--out", default=None, help="write the rows as JSON lines here")
     args = ap.parse_args()
+    if args.seeds < 1 or args.jobs < 1:
+        ap.error(f"--seeds {args.seeds}, --jobs {args.jobs}: expected at least 1 each")
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
