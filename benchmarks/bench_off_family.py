@@ -26,7 +26,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from multiprocessing import Pool
 from pathlib import Path
 
@@ -58,20 +57,6 @@ VARIANTS = {
 }
 
 
-def magnified(scn, zoom: float):
-    """The scenario seen by a camera ``zoom`` times closer (pixel size / zoom about the
-    frame's centre; the paper markers' image radii scale too)."""
-    c = (scn.width - 1) / 2.0
-    ax, ay = scn.axis_xy
-    o = scn.optics
-    return scn.with_(pixel_size=scn.pixel_size / zoom,
-                     axis_xy=(c + (ax - c) * zoom, c + (ay - c) * zoom),
-                     centre_radius_px=scn.centre_radius_px * zoom,
-                     cd_radius_px=scn.cd_radius_px * zoom,
-                     optics=replace(o, optical_centre=(c + (o.optical_centre[0] - c) * zoom,
-                                                       c + (o.optical_centre[1] - c) * zoom)))
-
-
 def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
     """The frames as another camera or a defective sensor would give them."""
     rng = np.random.default_rng(7)
@@ -95,8 +80,8 @@ def run(job: tuple[str, int, str]) -> dict:
     import tifffile
 
     from measurement.imaging.frame_rate import tiff_metadata
-    from twin.scenario import random_scenario, render_scenario_frames, scenario_meta, \
-        simulate_scenario
+    from twin.scenario import magnified, random_scenario, render_scenario_frames, \
+        scenario_meta, simulate_scenario
 
     variant, seed, work = job
     options, zoom, post = VARIANTS[variant]

@@ -2,25 +2,11 @@
 ~10 px in radius): the two-reflection ball is still tracked."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from measurement.imaging.reflections import track_markers
-from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario
-
-
-def zoomed(scn, zoom: float):
-    """The scenario seen with ``zoom`` x the magnification about the frame's centre."""
-    c = (scn.width - 1) / 2.0
-    ax, ay = scn.axis_xy
-    oc = scn.optics.optical_centre
-    return scn.with_(pixel_size=scn.pixel_size / zoom,
-                     axis_xy=(c + (ax - c) * zoom, c + (ay - c) * zoom),
-                     centre_radius_px=scn.centre_radius_px * zoom,
-                     cd_radius_px=scn.cd_radius_px * zoom,
-                     optics=replace(scn.optics, optical_centre=(c + (oc[0] - c) * zoom,
-                                                                c + (oc[1] - c) * zoom)))
+from twin.scenario import magnified, random_scenario, render_scenario_frames, \
+    simulate_scenario
 
 
 def test_two_reflection_ball_of_a_magnified_camera_is_tracked():
@@ -28,7 +14,7 @@ def test_two_reflection_ball_of_a_magnified_camera_is_tracked():
     the 5 px default was kept and every frame of the ball was lost ("marker 'ball' lost in
     frames 0-3071 ...; circle fit failed": 3 of 3 two-reflection recordings of seeds
     20000-20007 at 2x)."""
-    scn = zoomed(random_scenario(20003, size=512, n_frames=1000, lighting="two_spot"), 2.0)
+    scn = magnified(random_scenario(20003, size=512, n_frames=1000, lighting="two_spot"), 2.0)
     assert scn.ball_radius_px > 9.0
     state, pos = simulate_scenario(scn)
     n = 300

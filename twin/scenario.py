@@ -188,6 +188,23 @@ def random_scenario(seed: int, *, size: int = 256, lighting: str | None = None,
         albedo_marker=u(0.75, 0.95), exposure_scale=u(35.0, 70.0), predicted_slip_s=t_pred)
 
 
+def magnified(scn: Scenario, zoom: float) -> Scenario:
+    """``scn`` seen by a camera ``zoom`` times closer: pixel size / zoom about the frame's
+    centre (axis, optical centre and the paper markers' image radii scale; the ball's follows
+    from its size over the pixel size). For recordings outside the family's magnification."""
+    if not zoom > 0:
+        raise ParameterError("zoom", zoom, "a magnification factor > 0")
+    c = (scn.width - 1) / 2.0
+    ax, ay = scn.axis_xy
+    oc = scn.optics.optical_centre
+    return scn.with_(pixel_size=scn.pixel_size / zoom,
+                     axis_xy=(c + (ax - c) * zoom, c + (ay - c) * zoom),
+                     centre_radius_px=scn.centre_radius_px * zoom,
+                     cd_radius_px=scn.cd_radius_px * zoom,
+                     optics=replace(scn.optics, optical_centre=(c + (oc[0] - c) * zoom,
+                                                                c + (oc[1] - c) * zoom)))
+
+
 # ------------------------------------------------------------------------------ simulation
 
 
