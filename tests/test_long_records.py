@@ -133,3 +133,24 @@ def test_the_cap_is_checked():
     with pytest.raises(ParameterError, match="max_fit_samples"):
         InferenceOptions(max_fit_samples=10)
     assert AnalysisOptions().inference.max_fit_samples == 3072
+
+
+def test_a_long_record_that_ends_settling_keeps_the_slip_direction():
+    """Seed 20025 at 12000 frames: 0.2 s of acceleration, then 2.4 s of the PI loop settling
+    at its last speed (a slow overshoot the other way, then noise). The median omega_dot over
+    the whole record has the settling's sign; the ball slips against the acceleration."""
+    from measurement.imaging import tracks_io
+    from measurement.inference.analysis import _kinematics, fixed_axis
+    from measurement.inference.slip_model import slip_direction
+    times, x, y, ball, state = scenario_tracks(20025, n_frames=12000)
+    i = int(np.searchsorted(times, state["switches"][0]))
+    true_s = int(np.sign(state["beta"][i + 200] - state["beta"][i]))   # where the ball went
+    theta, _ = tracks_io.angles_from_pixels(*fixed_axis(x, y))
+    kin = _kinematics(times, theta, AnalysisOptions())
+    # the record is one where the whole-record median misleads
+    assert (-1 if np.median(kin.omega_dot[kin.trusted]) > 0 else 1) != true_s
+    assert slip_direction(kin.omega, kin.omega_dot, kin.trusted) == true_s
+    s, _ = _analyse((times, x, y, ball, state))
+    assert s["slip_direction"] == true_s
+    assert s["mu_low"] is not None and s["mu_high"] is not None
+    assert s["mu_low"] <= ball.mu <= s["mu_high"], (s["mu_low"], ball.mu, s["mu_high"])

@@ -104,7 +104,10 @@ def _analysis_options(args: argparse.Namespace):
                                  lower=args.lower),
         mc_draws=args.mc_draws, seed=args.seed,
         inference=InferenceOptions(confidence=in_range(
-            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95")),
+            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95"),
+            max_fit_samples=integer_range(
+                "--max-fit-samples", args.max_fit_samples, 256, 16384,
+                "samples of the model fit's window; its noise covariance takes ~50 n^2 bytes")),
         kinematics=args.kinematics, drive_model=drive_model_from_args(args))
 
 
@@ -264,6 +267,10 @@ def register(subparsers) -> None:
                         "(default 0: the model's profile likelihood is the uncertainty)")
     p.add_argument("--confidence", type=float, default=0.95,
                    help="level of the confidence sets on mu and mu_d (default 0.95)")
+    p.add_argument("--max-fit-samples", type=int, default=3072,
+                   help="most samples of the model fit's window (default 3072); a longer one "
+                        "(a late slip in a long record) is cut around the slip's first move: "
+                        "its noise covariance costs n^2 memory and n^3 time (8192: ~3 GB)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
@@ -295,4 +302,4 @@ def register(subparsers) -> None:
 OPTION_OF = {"sg_window_s": "--sg-window-s", "window": "--window", "trim_s": "--trim-s",
              "poly_degree": "--poly-degree", "k_sigma": "--k-sigma", "mc_draws": "--mc-draws",
              "fps": "--fps", "bins": "--bins", "l": "--l", "d": "--d", "seeds": "--seeds",
-             "method": "--method"}
+             "method": "--method", "max_fit_samples": "--max-fit-samples"}
