@@ -21,10 +21,10 @@ otherwise the nearest allowed size. A recording whose markers need more than the
 is refused with the numbers (:class:`WindowError`).
 
 R_i and v_i are measured at the seeds in the first :data:`MOTION_FRAMES` + 1 frames: the
-azimuthal mean of |frame - background| about the seed (the background: the median of an annulus
-at half the distance to the nearest other marker), its peak and where it falls below
-:data:`EDGE_LEVEL` of that peak; v_i the largest step of the centroid of the pixels above half
-the peak, frame to frame. A marker too faint to measure (peak below :data:`MIN_SNR` times the
+ring means of |frame - background| about the seed over the pixels nearer it than the other
+markers (the background: a plane fitted to the outer rings, out to the nearest other marker),
+their peak and where they fall below :data:`EDGE_LEVEL` of that peak; v_i the largest step of
+the centroid of the pixels above half the peak, frame to frame. A marker too faint to measure (peak below :data:`MIN_SNR` times the
 background noise; a faint ball found by the stacked finder) is left out of the needs.
 """
 from __future__ import annotations
@@ -69,28 +69,47 @@ class MarkerExtent:
     contrast: float
 
 
-def _profile(img: np.ndarray, x: float, y: float, r_lim: float
-             ) -> tuple[np.ndarray, float, float] | None:
-    """Azimuthal mean of |img - background| in 1 px rings about (x, y) out to r_lim [px], the
-    background's noise sigma (robust) and the background; None at the frame edge."""
-    h, w = img.shape
+#: Farthest radius [px] of a marker's profile (a marker 4x the family's still fits).
+MAX_PROFILE_PX = 64.0
+
+
+def _region(shape: tuple[int, int], x: float, y: float, others: np.ndarray, r_lim: float):
+    """Patch slices, pixel coordinates, distances [px] from (x, y) and the mask of the pixels
+    within ``r_lim`` [px] of (x, y) and nearer to it than to any of ``others`` (K, 2) [px]."""
+    h, w = shape
     n = int(math.ceil(r_lim))
     xi, yi = int(round(x)), int(round(y))
     x0, x1, y0, y1 = max(0, xi - n), min(w, xi + n + 1), max(0, yi - n), min(h, yi + n + 1)
-    patch = img[y0:y1, x0:x1].astype(np.float64)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
+    yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     d = np.hypot(xx - x, yy - y)
-    outer = (d >= max(0.7 * r_lim, r_lim - 3.0)) & (d <= r_lim)
-    if outer.sum() < 8:
+    mask = d <= r_lim
+    for ox, oy in others:
+        mask &= d < np.hypot(xx - ox, yy - oy)
+    return (slice(y0, y1), slice(x0, x1)), xx, yy, d, mask
+
+
+def _profile(img: np.ndarray, x: float, y: float, others: np.ndarray, r_lim: float
+             ) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """Ring means (1 px rings) of |img - background| about (x, y) out to r_lim [px] over the
+    pixels nearer (x, y) than the other markers; the background is a plane fitted to the
+    outer rings (from max(0.6 r_lim, r_lim - 4) px). Also the background's robust noise sigma
+    [grey levels] and the plane (value at (x, y), d/dx, d/dy); None: too few background
+    pixels (a marker at the frame's edge)."""
+    sl, xx, yy, d, mask = _region(img.shape, x, y, others, r_lim)
+    patch = img[sl].astype(np.float64)
+    outer = mask & (d >= max(0.6 * r_lim, r_lim - 4.0))
+    if outer.sum() < 12:
         return None
-    bg = float(np.median(patch[outer]))
-    noise = 1.4826 * float(np.median(np.abs(patch[outer] - bg)))
-    k = np.rint(d).astype(np.int64)
-    inside = d <= r_lim
-    sums = np.bincount(k[inside], weights=np.abs(patch[inside] - bg), minlength=n + 1)
-    counts = np.bincount(k[inside], minlength=n + 1)
-    prof = sums / np.maximum(counts, 1)
-    return prof, noise, bg
+    basis = np.column_stack([np.ones(int(outer.sum())), xx[outer] - x, yy[outer] - y])
+    coef = np.linalg.lstsq(basis, patch[outer], rcond=None)[0]
+    res = patch[outer] - basis @ coef
+    noise = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+    dev = np.abs(patch - (coef[0] + coef[1] * (xx - x) + coef[2] * (yy - y)))
+    k = np.rint(d[mask]).astype(np.int64)
+    n = int(math.ceil(r_lim)) + 1
+    prof = np.bincount(k, weights=dev[mask], minlength=n) / np.maximum(
+        np.bincount(k, minlength=n), 1)
+    return prof, noise, coef
 
 
 def _outer_radius(prof: np.ndarray) -> tuple[float, float]:
@@ -106,50 +125,47 @@ def _outer_radius(prof: np.ndarray) -> tuple[float, float]:
     return float(len(prof) - 1), peak
 
 
-def _step(frames: np.ndarray, x: float, y: float, r_lim: float, bg: float, peak: float,
-          count: int) -> float:
-    """Largest frame-to-frame step [px] of the centroid of the pixels whose |value - bg| is
-    above half ``peak``, followed from (x, y) with the last step as prediction."""
-    h, w = frames.shape[1:]
-    n = int(math.ceil(r_lim))
-    px, py, vx, vy, prev, largest = x, y, 0.0, 0.0, None, 0.0
-    for f in frames[:count + 1]:
+def _step(frames: np.ndarray, x: float, y: float, others: np.ndarray, reach: float,
+          coef: np.ndarray, peak: float) -> float:
+    """Largest frame-to-frame step [px] of the centroid of the pixels whose |value -
+    background plane| is above half ``peak``, within ``reach`` [px] of the position the last
+    step predicts (and nearer it than the other markers), followed from (x, y)."""
+    px, py, vx, vy, largest = x, y, 0.0, 0.0, 0.0
+    for k, f in enumerate(frames):
         qx, qy = px + vx, py + vy
-        xi, yi = int(round(qx)), int(round(qy))
-        x0, x1, y0, y1 = max(0, xi - n), min(w, xi + n + 1), max(0, yi - n), min(h, yi + n + 1)
-        a = np.abs(f[y0:y1, x0:x1].astype(np.float64) - bg)
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        m = (a > 0.5 * peak) & (np.hypot(xx - qx, yy - qy) <= r_lim)
-        if not m.any():
-            return largest
-        cx, cy = float(xx[m].mean()), float(yy[m].mean())
-        if prev is not None:
+        sl, xx, yy, _, mask = _region(f.shape, qx, qy, others, reach)
+        bg = coef[0] + coef[1] * (xx - x) + coef[2] * (yy - y)
+        mask &= np.abs(f[sl].astype(np.float64) - bg) > 0.5 * peak
+        if not mask.any():
+            break
+        cx, cy = float(xx[mask].mean()), float(yy[mask].mean())
+        if k:
             vx, vy = cx - px, cy - py
             largest = max(largest, math.hypot(vx, vy))
-        px, py, prev = cx, cy, True
+        px, py = cx, cy
     return largest
 
 
 def marker_extents(frames: np.ndarray, seeds: np.ndarray) -> list[MarkerExtent]:
     """Outer radius and frame-to-frame step [px] of each marker at ``seeds`` (3, 2) [px]."""
     seeds = np.asarray(seeds, dtype=float)
-    d = np.hypot(*(seeds[:, None, :] - seeds[None, :, :]).transpose(2, 0, 1))
     first = np.asarray(frames[0])
+    head = np.asarray(frames[:MOTION_FRAMES + 1])
     out = []
     for i, (x, y) in enumerate(seeds):
-        r_lim = 0.5 * float(min(d[i, j] for j in range(len(seeds)) if j != i))
-        prof = _profile(first, x, y, r_lim) if r_lim >= 3.0 else None
-        if prof is None:
+        others = np.delete(seeds, i, axis=0)
+        nearest = float(np.min(np.hypot(*(others - seeds[i]).T)))
+        found = _profile(first, x, y, others, min(nearest, MAX_PROFILE_PX))
+        if found is None:
             out.append(MarkerExtent(None, 0.0, 0.0))
             continue
-        values, noise, bg = prof
+        values, noise, coef = found
         outer, peak = _outer_radius(values)
         if peak < MIN_SNR * max(noise, 0.5):
             out.append(MarkerExtent(None, 0.0, peak))
             continue
-        step = _step(np.asarray(frames[:MOTION_FRAMES + 1]), x, y, r_lim, bg, peak,
-                     MOTION_FRAMES)
-        out.append(MarkerExtent(outer, step, peak))
+        reach = min(nearest, outer + 0.25 * nearest)   # room for the motion
+        out.append(MarkerExtent(outer, _step(head, x, y, others, reach, coef, peak), peak))
     return out
 
 
