@@ -6,14 +6,15 @@ marker. What w must do follows from the geometry of the three markers in the ima
 * **hold each marker** (its disk plus the blur around it, out to where its contrast has fallen
   to :data:`EDGE_LEVEL` of its peak: the outer radius R_i) inside the window's 2 px border ring
   (the plane fit of :mod:`measurement.imaging.window_fits` reads the background there), with
-  room for the marker's frame-to-frame motion v_i twice (:data:`MOTION_MARGIN`: after a lost
-  frame the seeded pass predicts no motion, and a staircase drive speeds up during a record):
-  (w - 1) / 2 >= R_i + RING_PX + 2 v_i; and the seeded pass's jump test (w / 3 px a frame) must
+  room for the marker's frame-to-frame motion v_i twice (:data:`MOTION_MARGIN`: frame 1 and
+  the frame after a lost one are predicted without motion): w / 2 - RING_PX - 0.5 px rounding
+  >= R_i + 2 v_i (:func:`hold_px`); and the seeded pass's jump test (w / 3 px a frame) must
   let the marker move: w >= 3 * 2 v_i;
 * **not reach another marker**: the ball runs on a circle of radius l (the distance between
   the centre marker's and the ball's seeds) about the centre marker and passes the CD marker at
-  r_cd - l; any side of a window may face it, so its half-diagonal w / sqrt(2) stays below
-  each gap g minus the other marker's outer radius: w <= sqrt(2) (g - R_other).
+  r_cd - l; any side of a window may face it, so its half-diagonal plus the rounding,
+  sqrt(2) (w / 2 + 0.5 px), stays below each gap g minus the other marker's outer radius
+  (:func:`reach_limit_px`).
 
 Of the windows allowed, the family's :data:`FAMILY_WINDOW_PX` (30 px, on which every figure of
 the benchmarks was measured: markers of radius <= 7 px at ~0.3 mm/px) is kept where it fits;
@@ -24,8 +25,9 @@ R_i and v_i are measured at the seeds in the first :data:`MOTION_FRAMES` + 1 fra
 ring means of |frame - background| about the seed over the pixels nearer it than the other
 markers (the background: a plane fitted to the outer rings, out to the nearest other marker),
 their peak and where they fall below :data:`EDGE_LEVEL` of that peak; v_i the largest step of
-the centroid of the pixels above half the peak, frame to frame. A marker too faint to measure (peak below :data:`MIN_SNR` times the
-background noise; a faint ball found by the stacked finder) is left out of the needs.
+the centroid of the pixels above half the peak, frame to frame. A marker too faint to measure
+(peak below :data:`MIN_SNR` times the background noise; a faint ball found by the stacked
+finder) is left out of the needs.
 """
 from __future__ import annotations
 
@@ -212,9 +214,11 @@ class WindowChoice:
                         "nearest size that does"}
 
 
-def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent]) -> WindowChoice:
+def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent],
+                        frame_px: int = MAX_WINDOW_PX) -> WindowChoice:
     """The window [px] for markers at ``seeds`` (3, 2) [px] (centre, CD, ball) with these
-    extents (see the module doc). Raises :class:`WindowError` where none fits."""
+    extents (see the module doc), at most ``frame_px`` (the frame's smaller side). Raises
+    :class:`WindowError` where none fits."""
     seeds = np.asarray(seeds, dtype=float)
     l_px = float(np.hypot(*(seeds[2] - seeds[0])))
     r_cd = float(np.hypot(*(seeds[1] - seeds[0])))
@@ -225,8 +229,8 @@ def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent]) -> Windo
     # (gap, other marker) for each ordered pair: centre-ball, CD-ball, centre-CD
     pairs = ((gaps[0], 2), (gaps[0], 0), (gaps[1], 2), (gaps[1], 1), (gaps[2], 1), (gaps[2], 0))
     allows = min(reach_limit_px(g, outer[j]) for g, j in pairs)
-    low, high = max(MIN_WINDOW_PX, math.ceil(needs - 1e-9)), min(MAX_WINDOW_PX,
-                                                                   math.floor(allows + 1e-9))
+    low = max(MIN_WINDOW_PX, math.ceil(needs - 1e-9))
+    high = min(MAX_WINDOW_PX, frame_px, math.floor(allows + 1e-9))
     if low > high:
         worst = int(np.argmax([hold_px(e) if e.outer_px is not None else 0.0
                                for e in extents]))
@@ -244,7 +248,7 @@ def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent]) -> Windo
 def choose_window(frames: np.ndarray, seeds: np.ndarray) -> WindowChoice:
     """The tracking window [px] for ``frames`` (N, H, W) with markers at ``seeds`` (3, 2) [px]
     in frame 0 (centre, CD, ball): measured extents, then :func:`window_from_extents`."""
-    return window_from_extents(seeds, marker_extents(frames, seeds))
+    return window_from_extents(seeds, marker_extents(frames, seeds), min(frames.shape[1:]))
 
 
 def resolve_window(frames: np.ndarray, seeds: np.ndarray, given: int | None, source: str,
