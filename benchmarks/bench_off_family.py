@@ -52,6 +52,8 @@ VARIANTS = {
     "size512": ({"size": 512}, None, None),
     "zoom1.5": ({"size": 384}, 1.5, None),
     "zoom2": ({"size": 512}, 2.0, None),
+    "zoom0.7": ({}, 0.7, None),
+    "zoom0.5": ({}, 0.5, None),
     "u16x256": ({}, None, "x256"),
     "gamma": ({}, None, "gamma"),
     "dim": ({}, None, "dim"),

@@ -192,7 +192,12 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
                    help="markers are darker than their surroundings")
     p.add_argument("--method", default="isocontour",
                    help="centre-finding method: isocontour (default), report, moments")
-    p.add_argument("--window", type=int, default=30, help="tracking window [px] (default 30)")
+    p.add_argument("--window", type=int, default=None,
+                   help="tracking window [px]. Default: sized from the markers found in the "
+                        "first frames: 30 px where that holds every marker (its radius with "
+                        "blur, a 2 px border and twice its motion a frame, each side) without "
+                        "reaching another marker or the ball's path; else the nearest size "
+                        "that does (recorded in summary.json, input.window_choice)")
     step = p.add_mutually_exclusive_group()
     step.add_argument("--edge-step", action="store_true",
                       help="isocontour: end with one least-squares step of a blurred-disk model "
