@@ -37,16 +37,25 @@ def alpha_profile(kind: str, t: np.ndarray) -> np.ndarray:
 
     ``ramp``: linear in time (report sec. 4.1), -300 t. ``steps``: a staircase-like profile,
     a jump of -25 rad/s^2 every 50 ms from 10 ms on, each decaying with a 0.8 s time constant
-    (the slow PI loop of the report).
+    (the slow PI loop of the report). ``rundown`` / ``slowdown``: ``steps``, then from 0.6 s
+    a brake through standstill / to two thirds of the speed.
     """
     if kind == "ramp":
         return -300.0 * t
-    if kind == "steps":
+    if kind in ("steps", "rundown", "slowdown"):
         out = np.zeros_like(t)
         for k in range(20):
             ts = 0.01 + 0.05 * k
             out -= np.where(t >= ts, 25.0 * np.exp(-(t - ts) / 0.8), 0.0)
-        return out
+        if kind == "steps":
+            return out
+        # from 0.6 s the drive brakes: ``rundown`` through standstill into the other sense
+        # (+600 rad/s^2 reached in 50 ms), ``slowdown`` by 300 rad/s^2 for 0.15 s
+        t_b = 0.6
+        held = out[np.searchsorted(t, t_b)] * np.exp(-(t - t_b) / 0.05)
+        brake = (600.0 * np.minimum((t - t_b) / 0.05, 1.0) if kind == "rundown"
+                 else np.where(t < t_b + 0.15, 300.0, 0.0))
+        return np.where(t < t_b, out, held + brake)
     raise ValueError(kind)
 
 

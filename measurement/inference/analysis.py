@@ -26,7 +26,7 @@ from measurement.imaging.geometry import circle_centre, fixed_axis  # noqa: F401
 from measurement.inference import infer_mu as inference_mod
 from measurement.inference import running_max as interval_mod
 from measurement.inference import onset as onset_mod
-from measurement.inference.slip_model import signed_mu_req, slip_direction
+from measurement.inference.slip_model import signed_mu_req, slip_direction, spinning_run
 from measurement.inference import lighting_models, uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
@@ -43,8 +43,11 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
     if opt.kinematics == "drive-model":
         # imported only for this option (it loads the loop response and the drive file code)
         from measurement.kinematics import drive_model
-        return drive_model.apply(kin, theta, opt.drive_model)
-    return kin
+        kin = drive_model.apply(kin, theta, opt.drive_model)
+    # the ball model needs the ABU spinning (a stop or reversal leaves the trusted run)
+    trusted = spinning_run(kin.omega, kin.trusted)
+    return kin if trusted is kin.trusted or np.array_equal(trusted, kin.trusted) \
+        else replace(kin, trusted=trusted)
 
 
 def _estimator(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
