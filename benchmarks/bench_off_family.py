@@ -4,7 +4,11 @@
 frames, 256 px, 8-bit, a camera at ~0.3 mm/px. Real cameras differ, and so will independent
 checks. Each variant here renders the same scenarios with one thing changed (the frame rate,
 the record's length, the frame size, the magnification, the sample format or tone curve,
-stuck sensor pixels, the second highlight model) and runs ``abu measure`` with its default
+stuck sensor pixels, the second highlight model; the view mirrored, upside down or turned a
+quarter; an exposure of 0.95 of the frame interval; strong vignetting or a light falling off
+across the frame; RGB colour frames; a 4 mm ball or a 9 mm path radius (given with --d, --l);
+black markers on white paper (``--dark-markers``); a 320 x 256 sensor; a rolling shutter read
+over a frame interval) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
 those with both), the median relative width, the
@@ -26,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from multiprocessing import Pool
 from pathlib import Path
 
@@ -54,7 +59,37 @@ VARIANTS = {
     "hotpix": ({}, None, "hotpix"),
     "deadpix": ({}, None, "deadpix"),
     "alt": ({"lighting": "two_spot_alt"}, None, None),
+    "mirror": ({}, None, "mirror"),
+    "flipud": ({}, None, "flipud"),
+    "rot90": ({}, None, "rot90"),
+    "longexp": ({}, None, None),
+    "vignette": ({}, None, None),
+    "gradient": ({}, None, "gradient"),
+    "rgb": ({}, None, "rgb"),
+    "ball4mm": ({}, None, None),
+    "path9mm": ({}, None, None),
+    "darkmark": ({}, None, None),
+    "wide": ({"size": 320}, None, "crop256"),
+    "rolling": ({}, None, None),
 }
+#: variant -> the scenario changed after drawing, and the ``abu measure`` options it needs
+#: (a user states the ball's size and path radius: --d, --l)
+SCENARIO_CHANGES = {
+    # an exposure of 0.95 of the frame interval (the family: 0.1-0.5), sampled finely enough
+    "longexp": (lambda s: s.with_(optics=replace(s.optics, exposure_fraction=0.95),
+                                  blur_samples=24), []),
+    # a wide-angle lens stopped down: 1/(1+2 r^2)^2, 1/9 in the corners (the family: <= 0.5)
+    "vignette": (lambda s: s.with_(optics=replace(s.optics, vignetting=2.0)), []),
+    "ball4mm": (lambda s: s.with_(ball=replace(s.ball, d=4.0e-3)), ["--d", "0.004"]),
+    "path9mm": (lambda s: s.with_(ball=replace(s.ball, l=9.0e-3)), ["--l", "0.009"]),
+    # black markers on white paper, the paper exposed to 150 grey levels (the ball, lit as
+    # before, is then darker than the paper around it but for its highlights)
+    "darkmark": (lambda s: s.with_(albedo_bg=0.8, albedo_marker=0.08, exposure_scale=150.0),
+                 ["--dark-markers"]),
+}
+#: Rolling shutter: rows read out one after another over this fraction of a frame interval
+#: (a CMOS sensor at its full frame rate), top row first.
+ROLLING_READOUT = 1.0
 
 
 def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
@@ -67,6 +102,20 @@ def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
         return np.rint(255.0 * (frames / 255.0) ** (1 / 2.2)).astype(np.uint8)
     if how == "dim":       # 0.4 of the exposure
         return np.rint(frames * 0.4).astype(np.uint8)
+    if how == "mirror":    # seen from below (or a drive turning the other way): left-right
+        return np.ascontiguousarray(frames[:, :, ::-1])
+    if how == "flipud":
+        return np.ascontiguousarray(frames[:, ::-1])
+    if how == "rot90":     # the camera turned a quarter
+        return np.ascontiguousarray(np.rot90(frames, axes=(1, 2)))
+    if how == "gradient":  # one side lamp: the light falls from 1 to 0.4 across the frame
+        ramp = np.linspace(1.0, 0.4, w, dtype=np.float32)
+        return np.rint(frames * ramp).astype(np.uint8)
+    if how == "crop256":   # a 320 x 256 sensor: the middle 256 rows
+        return np.ascontiguousarray(frames[:, (h - 256) // 2:(h + 256) // 2])
+    if how == "rgb":       # a colour camera under warm light: RGB samples, blue weak
+        cast = np.array([1.0, 0.85, 0.6], dtype=np.float32)
+        return np.clip(np.rint(frames[..., None] * cast), 0, 255).astype(np.uint8)
     if how == "noisy":     # +5 grey levels of white noise
         return np.clip(np.rint(frames + rng.normal(0, 5.0, frames.shape)), 0, 255).astype(
             np.uint8)
@@ -81,25 +130,30 @@ def run(job: tuple[str, int, str]) -> dict:
 
     from measurement.imaging.frame_rate import tiff_metadata
     from twin.scenario import magnified, random_scenario, render_scenario_frames, \
-        scenario_meta, simulate_scenario
+        rolling_shutter_positions, scenario_meta, simulate_scenario
 
     variant, seed, work = job
     options, zoom, post = VARIANTS[variant]
+    change, extra = SCENARIO_CHANGES.get(variant, (None, []))
     row: dict = {"variant": variant, "seed": seed}
     scn = random_scenario(seed, **options)
     if zoom:
         scn = magnified(scn, zoom)
+    if change:
+        scn = change(scn)
     state, pos = simulate_scenario(scn)
-    frames = render_scenario_frames(scn, state, pos)
+    frames = render_scenario_frames(scn, state, rolling_shutter_positions(
+        scn, state, pos, ROLLING_READOUT) if variant == "rolling" else pos)
     if post:
         frames = postprocess(frames, post)
     meta = scenario_meta(scn, state, pos)
     d = Path(work) / f"{variant}_{seed}"
     d.mkdir(parents=True)
-    tifffile.imwrite(d / "frames.tif", frames, photometric="minisblack", contiguous=True,
+    tifffile.imwrite(d / "frames.tif", frames, contiguous=True,
+                     photometric="rgb" if frames.ndim == 4 else "minisblack",
                      metadata=tiff_metadata(scn.fps, 0.0))
     cmd = [sys.executable, "-m", "abu.cli.main", "measure", str(d / "frames.tif"), "--out",
-           str(d / "m"), "--no-plots", "--quiet"]
+           str(d / "m"), "--no-plots", "--quiet"] + extra
     if int(meta["ball_reflections"]) == 2:
         cmd += ["--ball-reflections", "2"]
     env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
