@@ -169,7 +169,8 @@ def run(job: tuple[str, int, str]) -> dict:
         row["error"] = (err.strip().splitlines() or ["?"])[-1]
         return row
     lo, hi = s.get("mu_low"), s.get("mu_high")
-    row.update(status=s.get("status"), mu_low=lo, mu_high=hi)
+    row.update(status=s.get("status"), mu_low=lo, mu_high=hi, t_slip_low=s.get("t_slip_low"),
+               t_slip_high=s.get("t_slip_high"), t_slip_true=meta["simulation"]["t_slip_s"])
     if lo is not None and hi is not None:   # a null bound is counted apart, never as a hit
         row.update(covered=lo <= meta["mu"] <= hi, width=(hi - lo) / (0.5 * (hi + lo)))
     return row
