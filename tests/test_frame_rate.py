@@ -27,6 +27,7 @@ import pytest
 from abu.cli.main import main
 from measurement.imaging.camera_files import read_camera_file, write_cine, write_mraw
 from measurement.imaging.frame_rate import MissingFrameRateError
+from measurement.imaging.recording_checks import RecordingError
 from measurement.imaging.frames_io import (read_recording, write_frame_folder,
                                            write_multipage_tiff, write_npy)
 from measurement.imaging.tracks_io import read_tracks_csv
@@ -277,6 +278,15 @@ def test_cine_image_times_dropped_frames_refused_jitter_within_tolerance_read(tm
                       image_times_s=jitter)
     rec = read_recording(path)
     assert rec.fps_hz == fps and np.array_equal(np.asarray(rec.frames), frames)
+    # at 300,000 frames/s (3.33 us apart), times kept to a 1 us clock (3 or 4 us apart) are
+    # read; a dropped frame is refused
+    fast = np.round((t0 + np.arange(n) / 300_000) * 1e6) / 1e6
+    read_recording(write_cine(tmp_path / "fast.cine", frames, 300_000, 8,
+                              trigger_time_unix_s=t0, image_times_s=fast))
+    with pytest.raises(RecordingError, match="images 9 and 10"):
+        read_recording(write_cine(tmp_path / "fast.cine", frames, 300_000, 8,
+                                  trigger_time_unix_s=t0,
+                                  image_times_s=fast + (np.arange(n) >= 10) / 300_000))
     # the default writer's evenly spaced times, with or without a trigger time, are read
     for kw in ({}, {"trigger_time_unix_s": t0}, {"first_image_no": -n + 1}):
         read_recording(write_cine(tmp_path / "even.cine", frames, fps, 8, **kw))
