@@ -11,7 +11,8 @@ black markers on white paper (``--dark-markers``); a 320 x 256 sensor; a rolling
 over a frame interval) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
-those with both), the median relative width, the
+those with both), the median relative width, the onset brackets [t_slip_low, t_slip_high]
+holding the simulated first slip, the
 refusals (their first words) and the median CPU time of ``abu measure`` (the process's, from
 ``wait4``; the machine may be shared).
 
@@ -176,9 +177,20 @@ def run(job: tuple[str, int, str]) -> dict:
     return row
 
 
+def _bracketed(r: dict) -> bool | None:
+    """Whether [t_slip_low, t_slip_high] holds the true onset (None: a bound or it missing)."""
+    lo, hi, t = r.get("t_slip_low"), r.get("t_slip_high"), r.get("t_slip_true")
+    return None if None in (lo, hi, t) else lo <= t <= hi
+
+
+def _refusal(error: str) -> str:
+    """A refusal's words, without the command's prefix and the temporary file's path."""
+    return error.split("error: ", 1)[-1].split("frames.tif", 1)[-1].lstrip(",: ")[:70]
+
+
 def report(rows: list[dict]) -> None:
     print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'null bound':>10s} {'covered':>8s} "
-          f"{'median width':>12s} {'CPU s':>6s}  refusals")
+          f"{'median width':>12s} {'onset in':>8s} {'CPU s':>6s}  refusals")
     for v in VARIANTS:
         rs = [r for r in rows if r["variant"] == v]
         if not rs:
@@ -186,10 +198,12 @@ def report(rows: list[dict]) -> None:
         ok = [r for r in rs if r["exit"] == 0]
         both = [r for r in ok if "width" in r]     # both bounds finite
         widths = [r["width"] for r in both]
-        refused = sorted({r["error"].split(":")[-1].strip()[:70] for r in rs if r["exit"]})
+        onsets = [b for b in map(_bracketed, ok) if b is not None]
+        refused = sorted({_refusal(r["error"]) for r in rs if r["exit"]})
         print(f"{v:10s} {len(rs):4d} {len(ok):8d} {len(ok) - len(both):10d} "
               f"{sum(r['covered'] for r in both):5d}/{len(both):<2d} "
               f"{100 * np.median(widths) if widths else float('nan'):11.1f}% "
+              f"{sum(onsets):5d}/{len(onsets):<2d} "
               f"{np.median([r['cpu_s'] for r in rs]):6.2f}  {'; '.join(refused)}")
 
 
