@@ -8,7 +8,7 @@ stuck sensor pixels, the second highlight model; the view mirrored, upside down 
 quarter; an exposure of 0.95 of the frame interval; strong vignetting or a light falling off
 across the frame; RGB colour frames; a 4 mm ball or a 9 mm path radius (given with --d, --l);
 black markers on white paper (``--dark-markers``); a 320 x 256 sensor; a rolling shutter read
-over a frame interval) and runs ``abu measure`` with its default
+over a frame interval; one frame dropped from the file) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
 those with both), the median relative width, the onset brackets [t_slip_low, t_slip_high]
@@ -72,6 +72,7 @@ VARIANTS = {
     "darkmark": ({}, None, None),
     "wide": ({"size": 320}, None, "crop256"),
     "rolling": ({}, None, None),
+    "drop1": ({}, None, "drop1"),
 }
 #: variant -> the scenario changed after drawing, and the ``abu measure`` options it needs
 #: (a user states the ball's size and path radius: --d, --l)
@@ -112,6 +113,8 @@ def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
     if how == "gradient":  # one side lamp: the light falls from 1 to 0.4 across the frame
         ramp = np.linspace(1.0, 0.4, w, dtype=np.float32)
         return np.rint(frames * ramp).astype(np.uint8)
+    if how == "drop1":     # frame 1000 lost on the way, the time base still even
+        return np.delete(frames, 1000, axis=0)
     if how == "crop256":   # a 320 x 256 sensor: the middle 256 rows
         return np.ascontiguousarray(frames[:, (h - 256) // 2:(h + 256) // 2])
     if how == "rgb":       # a colour camera under warm light: RGB samples, blue weak
