@@ -55,7 +55,9 @@ class TrackingSettings:
             ball; None: found automatically (:func:`measurement.imaging.markers.find_markers`).
         dark_markers: markers darker than their surroundings.
         method: centre-finding method (``isocontour``, ``report``, ``moments``).
-        window_px: tracking window [px].
+        window_px: tracking window [px]; None (the default): sized from the markers found
+            in the first frames (:mod:`measurement.imaging.window_size`; 30 px for the
+            family's recordings).
         ball_reflections: 1, or 2 for the report's two-spot lighting.
         ball_method: with two reflections, ``outline`` or ``pair``.
         progress: progress bar on stderr while tracking.
@@ -70,7 +72,7 @@ class TrackingSettings:
     seeds_px: np.ndarray | None = None
     dark_markers: bool = False
     method: str = "isocontour"
-    window_px: int = 30
+    window_px: int | None = None
     ball_reflections: int = 1
     ball_method: str = "outline"
     progress: bool = False
@@ -222,6 +224,7 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
     from measurement.imaging.frames_io import read_recording
     from measurement.imaging.markers import format_seeds
     from measurement.imaging.reflections import track_markers
+    from measurement.imaging.window_size import resolve_window
 
     rec = read_recording(path)
     rate = resolve_frame_rate(rec.fps_hz, rec.fps_source, fps_hz, source=rec.source,
@@ -239,7 +242,8 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
         raise MarkerError(f"{rec.source}, frame 0: {exc}") from None
     h, w = frames.shape[1:]
     _check_seeds_inside(seeds, w, h)
-    tracks = track_markers(frames, seeds, method=settings.method, window=settings.window_px,
+    window, window_choice = resolve_window(frames, seeds, settings.window_px, rec.source, log)
+    tracks = track_markers(frames, seeds, method=settings.method, window=window,
                            dark=settings.dark_markers, progress=settings.progress,
                            ball_reflections=settings.ball_reflections,
                            ball_method=settings.ball_method, edge_step=settings.edge_step)
@@ -261,6 +265,8 @@ def track_recording(path: str | Path, *, fps_hz: float | None = None,
             "lost_reasons": tracks.lost_summary(),
             "compression": detect(frames, rec.codec).summary(),
             "ball_reflections": int(settings.ball_reflections)}
+    if window_choice is not None:  # as defective_pixels: only where not the family's 30 px
+        info["window_choice"] = window_choice
     if len(defects):  # only then: a recording without any keeps its summary as it was
         info["defective_pixels"] = {"count": len(defects),
                                     "first_xy_px": defects[:100, ::-1].tolist()}

@@ -31,12 +31,18 @@ N_COVERAGE = 30
 TWO_PI = 2.0 * math.pi
 
 
-def scenario_tracks(seed: int, n_frames: int = 2400, light_scale: float = 1.0):
+def scenario_tracks(seed: int, n_frames: int = 2400, light_scale: float = 1.0,
+                    lead_s: float = 0.0):
     """(times, x, y, ball, truth) of one drawn scenario at the tracks level (``light_scale``
-    multiplies the lighting shift of the ball's apparent centre)."""
-    from twin.scenario import random_scenario, simulate_scenario
+    multiplies the lighting shift of the ball's apparent centre). ``lead_s`` [s]: the drive's
+    constant starting speed held that much longer before the scenario (the ball stuck): a
+    late slip in a long record (``twin.scenario.with_lead``; ParameterError for a drive that
+    starts accelerating)."""
+    from twin.scenario import random_scenario, simulate_scenario, with_lead
     scn = random_scenario(seed, n_frames=n_frames)
     state, pos = simulate_scenario(scn)
+    if lead_s:
+        scn, state, pos = with_lead(scn, state, lead_s)
     rng = np.random.default_rng([seed, 7])
     phi = state["theta"] + state["beta"]
     shift = np.zeros((phi.size, 2))

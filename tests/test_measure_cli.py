@@ -150,6 +150,7 @@ def test_measure_prints_a_readable_result(tracks_csv, tmp_path, capsys):
     (["--l", "0"], "'--l' = 0.0"),
     (["--mc-draws", "-1"], "'--mc-draws' = -1"),
     (["--k-sigma", "nan"], "'--k-sigma'"),
+    (["--max-fit-samples", "100"], "'--max-fit-samples' = 100: expected an integer in [256, 16384]"),
 ])
 def test_measure_bad_options_exit_2(tracks_csv, tmp_path, capsys, args, match):
     out = tmp_path / "o"

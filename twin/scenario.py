@@ -248,6 +248,32 @@ def simulate_scenario(scn: Scenario) -> tuple[dict[str, np.ndarray], dict[str, n
     return state, marker_positions(scn, state["theta"], state["beta"])
 
 
+def with_lead(scn: Scenario, state: dict[str, np.ndarray], lead_s: float
+              ) -> tuple[Scenario, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(scenario, state, marker positions) with the drive's constant starting speed held
+    ``lead_s`` [s] longer before the scenario: the ball stuck that long, a late slip in a long
+    record. The state's arrays and switch times are shifted by the lead.
+
+    Raises:
+        ParameterError: a drive that starts accelerating (a smooth profile) cannot be
+            extended back; or a negative lead.
+    """
+    if not lead_s >= 0.0:
+        raise ParameterError("lead", lead_s, "a time >= 0 s")
+    # held at a constant speed (omega_dot = 0, so mu_req = 0) the ball sticks
+    if state["alpha"][0] != 0.0:
+        raise ParameterError("lead", lead_s, f"a drive that starts at a constant speed "
+                             f"(seed {scn.seed} starts accelerating)")
+    lead = int(round(lead_s * scn.fps))
+    n = scn.n_frames
+    out = {k: np.r_[np.full(lead, v[0]), v] if np.ndim(v) and len(v) == n else v
+           for k, v in state.items()}
+    out["theta"][:lead] += state["omega"][0] * (np.arange(-lead, 0) / scn.fps)
+    out["switches"] = np.asarray(state["switches"], float) + lead / scn.fps
+    scn = scn.with_(n_frames=n + lead)
+    return scn, out, marker_positions(scn, out["theta"], out["beta"])
+
+
 # ------------------------------------------------------------------------------ rendering
 
 

@@ -58,8 +58,9 @@ def check_tracking_options(args: argparse.Namespace) -> None:
     positive("--fps", args.fps, "frames/s", allow_none=True)
     if args.fps is not None:
         camera_fps("--fps", args.fps)
-    integer_range("--window", args.window, 8, 4096, "the square tracking window around a marker "
-                  "[px]")
+    if args.window is not None:   # None: sized from the markers (window_size)
+        integer_range("--window", args.window, 8, 4096, "the square tracking window around a "
+                      "marker [px]")
 
 
 def check_render_options(args: argparse.Namespace) -> None:

@@ -104,7 +104,10 @@ def _analysis_options(args: argparse.Namespace):
                                  lower=args.lower),
         mc_draws=args.mc_draws, seed=args.seed,
         inference=InferenceOptions(confidence=in_range(
-            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95")),
+            "--confidence", args.confidence, 0.5, 0.9999, "", "a probability, e.g. 0.95"),
+            max_fit_samples=integer_range(
+                "--max-fit-samples", args.max_fit_samples, 256, 16384,
+                "samples of the model fit's window; its noise covariance takes ~50 n^2 bytes")),
         kinematics=args.kinematics, drive_model=drive_model_from_args(args))
 
 
@@ -189,7 +192,12 @@ def _add_tracking_options(p: argparse.ArgumentParser) -> None:
                    help="markers are darker than their surroundings")
     p.add_argument("--method", default="isocontour",
                    help="centre-finding method: isocontour (default), report, moments")
-    p.add_argument("--window", type=int, default=30, help="tracking window [px] (default 30)")
+    p.add_argument("--window", type=int, default=None,
+                   help="tracking window [px]. Default: sized from the markers found in the "
+                        "first frames: 30 px where that holds every marker (its radius with "
+                        "blur, a 2 px border and twice its motion a frame, each side) without "
+                        "reaching another marker or the ball's path; else the nearest size "
+                        "that does (recorded in summary.json, input.window_choice)")
     step = p.add_mutually_exclusive_group()
     step.add_argument("--edge-step", action="store_true",
                       help="isocontour: end with one least-squares step of a blurred-disk model "
@@ -264,6 +272,10 @@ def register(subparsers) -> None:
                         "(default 0: the model's profile likelihood is the uncertainty)")
     p.add_argument("--confidence", type=float, default=0.95,
                    help="level of the confidence sets on mu and mu_d (default 0.95)")
+    p.add_argument("--max-fit-samples", type=int, default=3072,
+                   help="most samples of the model fit's window (default 3072); a longer one "
+                        "(a late slip in a long record) is cut around the slip's first move: "
+                        "its noise covariance costs n^2 memory and n^3 time (8192: ~3 GB)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
@@ -295,4 +307,4 @@ def register(subparsers) -> None:
 OPTION_OF = {"sg_window_s": "--sg-window-s", "window": "--window", "trim_s": "--trim-s",
              "poly_degree": "--poly-degree", "k_sigma": "--k-sigma", "mc_draws": "--mc-draws",
              "fps": "--fps", "bins": "--bins", "l": "--l", "d": "--d", "seeds": "--seeds",
-             "method": "--method"}
+             "method": "--method", "max_fit_samples": "--max-fit-samples"}

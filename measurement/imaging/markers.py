@@ -248,6 +248,13 @@ def ball_body(frame: np.ndarray, known: list[tuple[float, float]], r_max: float 
             "area": float(math.pi * r * r), "contrast": float(e[y0, x0]), "body": True}
 
 
+def away_px(blob: dict, r_max: float) -> float:
+    """Distance [px] beyond which a fainter candidate is not part of ``blob``: 2 ``r_max``,
+    or 3 of the blob's equivalent radii plus 4 px where smaller (its blur tail and, for a
+    ball, its rim around the highlight)."""
+    return min(2.0 * r_max, 3.0 * math.sqrt(blob["area"] / math.pi) + 4.0)
+
+
 def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window: int = 30,
                  r_min: float = 2.0, r_max: float = 12.0, ball_reflections: int = 1,
                  background: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
@@ -283,10 +290,12 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
         # A saturated ball's highlight (contrast ~200) puts a quarter of it above a paper
         # marker dimmed by vignetting at the frame's edge (rendered seed 149: the CD marker's
         # contrast ~50): look again at a tenth, keeping the candidates found first and adding
-        # only those away from them.
-        known = [(b["x"], b["y"]) for b in blobs]
+        # only those away from them: 2 r_max, or less about a smaller marker (a farther
+        # camera: at half our magnification the 2.5 px ball passes 19 px from the centre
+        # marker) by the size it was found with.
+        known = [(b["x"], b["y"], away_px(b, r_max)) for b in blobs]
         blobs += [b for b in candidates(0.1)
-                  if all(math.hypot(b["x"] - x, b["y"] - y) > 2.0 * r_max for x, y in known)]
+                  if all(math.hypot(b["x"] - x, b["y"] - y) > r for x, y, r in known)]
     if len(blobs) == 2 and ball_reflections == 2 and not dark:
         body = ball_body(img, [(b["x"], b["y"]) for b in blobs], r_max, background)
         if body is not None:

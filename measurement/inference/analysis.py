@@ -26,7 +26,7 @@ from measurement.imaging.geometry import circle_centre, fixed_axis  # noqa: F401
 from measurement.inference import infer_mu as inference_mod
 from measurement.inference import running_max as interval_mod
 from measurement.inference import onset as onset_mod
-from measurement.inference.slip_model import signed_mu_req
+from measurement.inference.slip_model import signed_mu_req, slip_direction
 from measurement.inference import lighting_models, uncertainty, window_sets
 from measurement.inference.analysis_summary import SUMMARY_UNITS, record_summary, record_table
 from measurement.inference.options import PHASES, AnalysisOptions  # noqa: F401  (re-exported)
@@ -81,8 +81,7 @@ def _core(time: np.ndarray, x: np.ndarray, y: np.ndarray, l: float, d: float,
     theta, beta = tracks_io.angles_from_pixels(*fixed_axis(x, y))
     kin = _kinematics(time, theta, opt)
     trusted = kin.trusted
-    med = float(np.median(kin.omega_dot[trusted])) if trusted.any() else 0.0
-    direction = -1 if med > 0 else 1
+    direction = slip_direction(kin.omega, kin.omega_dot, trusted)
     harm = _lighting_fit(time, theta, beta, tuple(opt.harmonic_orders) if opt.harmonic else (),
                          direction, opt)
     iv = interval_mod.slip_interval(time, kin.omega, kin.omega_dot, kin.sigma_omega,

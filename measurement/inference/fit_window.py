@@ -66,6 +66,15 @@ class TrustedRegion:
     q_first: float        #: first q, floored at 1e-6 [1]
     q_top: float          #: largest q [1]
 
+    def from_sample(self, k: int) -> "TrustedRegion":
+        """The region from its sample ``k`` on, as if the trusted run started there."""
+        w = self.window
+        q = w.q[k:]
+        run_max = np.maximum.accumulate(q)
+        return TrustedRegion(Window(slice(w.region.start + k, w.region.stop), w.t[k:],
+                                    w.theta[k:], w.beta[k:], w.omega[k:], q, w.x[k:]),
+                             run_max, float(max(q[0], 1e-6)), float(run_max[-1]))
+
 
 def trusted_region(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.ndarray,
                    omega_dot: np.ndarray, trusted: np.ndarray, l: float, d: float,
@@ -123,3 +132,48 @@ def fit_window(region: TrustedRegion, deviation: np.ndarray | None,
     # at least 20 ms: a ball already moving at the start must be seen to move
     n_fit = max(n_fit, min(t.size, max(2 * x.shape[1] + 40, int(round(0.02 / (t[1] - t[0]))))))
     return win.head(n_fit)
+
+
+#: The deviation [white-noise sigmas of beta] that marks where a capped window is centred: far
+#: above the smoothed deviation's noise (its sigma is ~4x below beta's), well below where the
+#: fit window ends (``window_sigmas``), so the first visible move of the slip.
+_MOVE_SIGMAS = 5.0
+
+
+def capped_window(region: TrustedRegion, win: Window, deviation: np.ndarray | None,
+                  opt: InferenceOptions) -> tuple[TrustedRegion, Window, dict]:
+    """(region, window, cut) with at most ``opt.max_fit_samples`` samples in the window;
+    ``cut``: {} when ``win`` is short enough, else where the window was cut [samples, s].
+
+    The noise model's dense covariances cost n^2 memory and n^3 time: a window of 8000 samples
+    takes 2.5 GB and 20 s, one of 20000 would not fit a laptop. Such windows arise from long
+    records (a ball that slips a little and sticks again never moves ``window_sigmas`` away, a
+    late slip). What the data say of mu lies where the ball first moves: the stick stretch
+    before it (the lower bound) and the first milliseconds of slip (the upper bound). A window
+    that ends where the data left the stick level keeps its end and loses its head. One that
+    runs to the region's end (the data never left it: the ball slipped a little and stuck
+    again, or never slipped) ends a quarter of the cap after the first move of
+    ``_MOVE_SIGMAS`` sigmas (without one, after the largest q, where "stuck" says most).
+    The region starts with the window, as if the trusted run started there: the fit is then
+    that of a shorter record, with its honesty; what the dropped head said (a lower q's
+    stick) is lost, never double-counted.
+    """
+    n_max = int(opt.max_fit_samples)
+    if win.t.size <= n_max:
+        return region, win, {}
+    end = win.t.size
+    if end == region.window.t.size:
+        anchor = int(np.argmax(win.q))
+        if deviation is not None:
+            sig_b = max(noise_level(region.window.beta), float(opt.sigma_floor_rad))
+            dev = np.asarray(deviation, float)[win.region]
+            moved = np.flatnonzero(np.abs(dev - dev[0]) > _MOVE_SIGMAS * sig_b)
+            if moved.size:
+                anchor = int(moved[0])
+        end = min(end, max(anchor + n_max // 4, n_max))
+    region = region.from_sample(end - n_max)
+    # the later region's window: the same end where the data left the stick level (now
+    # measured from the new start, within a sample or two), else cut at the anchor's
+    cut = fit_window(region, deviation, opt).head(n_max)
+    return region, cut, {"uncut_samples": int(win.t.size), "samples": int(cut.t.size),
+                         "start_s": float(cut.t[0]), "end_s": float(cut.t[-1])}

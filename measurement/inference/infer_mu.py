@@ -63,8 +63,8 @@ from measurement.inference.noise_models import noise_level  # noqa: F401 (re-exp
 from measurement.inference import sup_noise  # noqa: F401
 from measurement.inference.slip_model import signed_mu_req, slip_displacement  # noqa: F401 (re-exported)
 from measurement.inference.fit_window import harmonic_design as _harmonic_design  # noqa: F401
-from measurement.inference.fit_window import (TrustedRegion, Window, candidate_grid, fit_window,
-                                              trusted_region)
+from measurement.inference.fit_window import (TrustedRegion, Window, candidate_grid,
+                                              capped_window, fit_window, trusted_region)
 from measurement.inference.kinematic_nuisance import (KinematicErrors, KinematicNuisance,
                                                       kinematic_nuisance, scale_nuisance_bounds)
 from measurement.inference.profile_cache import MuDProfile, SlipModelCache
@@ -381,8 +381,9 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
     z = NormalDist().inv_cdf(0.5 + 0.5 * level)
     crit = z * z  # chi^2_1 quantile at the level
     region = trusted_region(time, theta, beta, omega, omega_dot, trusted, l, d, direction, opt)
+    # cut to max_fit_samples (summary.json's model_fit.fit_window_cut says where)
+    region, win, cut = capped_window(region, fit_window(region, deviation, opt), deviation, opt)
     mu_grid, ratios = candidate_grid(region, opt)
-    win = fit_window(region, deviation, opt)
     # the stages below share these caches: each pair is integrated, each mu profiled once
     models = SlipModelCache(win.t, win.q, win.omega, region.run_max, int(direction), d / l,
                             opt.max_episodes)
@@ -432,7 +433,8 @@ def infer_mu(time: np.ndarray, theta: np.ndarray, beta: np.ndarray, omega: np.nd
         t_slip=float(onset) if slip_seen and np.isfinite(onset) else None,
         beta_model=best_curve, beta_model_low=low_curve, beta_model_high=high_curve,
         residual=np.asarray(beta, float) - best_curve,
-        details={**_details(fit, lrf, pset, crit, nuis, opt), "model_curves": {
+        details={**_details(fit, lrf, pset, crit, nuis, opt),
+                 **({"fit_window_cut": cut} if cut else {}), "model_curves": {
             # the (mu, mu_d) each drawn model curve of beta.png was integrated with
             "best": {"mu": float(pset.mu_hat), "mu_d": float(best_mud)},
             "low": None if low_curve is None else {"mu": float(pset.low),

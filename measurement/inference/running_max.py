@@ -317,7 +317,8 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
         beta_residual: residual of the beta fit [rad] (its smoothed spread enters sigma_d).
         l, d: ball path radius and diameter [m].
         options: :class:`IntervalOptions`.
-        direction: +1 / -1 the direction beta moves in slip; default -sign(median omega_dot).
+        direction: +1 / -1 the direction beta moves in slip; default
+            :func:`slip_model.slip_direction` (-sign of omega_dot where |mu_req| is large).
         bias_omega_dot: bound on the estimator's truncation error of omega_dot [rad/s^2],
             added to k sigma (default none).
     """
@@ -335,8 +336,8 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
     m_lo = running_max(mu_lo, trusted)
     m_hi = running_max(mu_hi, trusted)
     if direction is None:
-        med = float(np.median(np.asarray(omega_dot)[trusted]))
-        direction = -1 if med > 0 else 1
+        from measurement.inference.slip_model import slip_direction
+        direction = slip_direction(omega, omega_dot, trusted)
     direction = int(direction)
 
     dev = _slip_deviation(beta_clean, beta_residual, direction, dt, options)

@@ -22,6 +22,26 @@ except ImportError:  # pragma: no cover - the NumPy reference gives the same res
     _slipc = None
 
 
+def slip_direction(omega: np.ndarray, omega_dot: np.ndarray, trusted: np.ndarray) -> int:
+    """Slip direction s of beta [-]: +1 while the ABU accelerates clockwise (omega_dot < 0),
+    -1 the other way: the sign opposite to the median omega_dot [rad/s^2] over the trusted
+    samples whose |mu_req| (omega_dot / omega^2, omega [rad/s]) is at least half its largest.
+
+    The ball slips where |mu_req| is large: those samples decide. The median over the whole
+    record let a long one that ends with the drive settling at its last speed decide by the
+    settling: on seed 20025 rendered with 12000 frames, 0.2 s of acceleration (mu_req up to
+    0.02) against 2.4 s of a PI loop's slow overshoot and noise (mu_req < 0.003), s flipped and
+    the analysis fitted the ball slipping the wrong way (no bound). On seeds 0-299 and
+    2000-2299 of the family (3072 frames) both rules give the same s in every record."""
+    od = np.asarray(omega_dot, float)
+    trusted = np.asarray(trusted, bool)
+    if not trusted.any():
+        return 1
+    q = np.abs(od) / np.maximum(np.asarray(omega, float) ** 2, 1e-12)
+    top = trusted & (q >= 0.5 * float(np.max(q[trusted])))
+    return -1 if float(np.median(od[top])) > 0 else 1
+
+
 def signed_mu_req(omega: np.ndarray, omega_dot: np.ndarray, l: float, d: float,
                   direction: int) -> np.ndarray:
     """q = (l - d/5) (-s omega_dot) / (l omega^2) [-]: mu_req, positive when it pushes along s."""

@@ -60,6 +60,10 @@ class InferenceOptions:
             enter beta's noise covariance as random effects, each coefficient with the
             variance of the order's squared amplitude in the record's residual
             (:mod:`lighting_leftover`; () off).
+        max_fit_samples: most samples in the fit window (its dense noise covariance costs
+            n^2 memory, n^3 time); a longer window is cut around the slip's first move
+            (:func:`fit_window.capped_window`). The default, 3072, is the twin's whole record
+            (4500 frames/s, 0.68 s): its windows are never cut.
     """
 
     confidence: float = 0.95
@@ -78,12 +82,15 @@ class InferenceOptions:
     theta_harmonic_rad: float = 8e-4
     drive_noise: bool = True
     leftover_orders: tuple[int, ...] = (5, 6, 7, 8, 9, 10, 11, 12)
+    max_fit_samples: int = 3072
 
     def __post_init__(self) -> None:
         if not 0.5 <= float(self.confidence) < 1.0:
             raise ParameterError("confidence", self.confidence, "a level in [0.5, 1)")
         if int(self.n_mu) < 8 or int(self.n_mu_d) < 2:
             raise ParameterError("n_mu", (self.n_mu, self.n_mu_d), "grids of >= 8 and >= 2")
+        if int(self.max_fit_samples) < 256:
+            raise ParameterError("max_fit_samples", self.max_fit_samples, ">= 256 samples")
 
 
 @dataclass
