@@ -4,10 +4,15 @@
 frames, 256 px, 8-bit, a camera at ~0.3 mm/px. Real cameras differ, and so will independent
 checks. Each variant here renders the same scenarios with one thing changed (the frame rate,
 the record's length, the frame size, the magnification, the sample format or tone curve,
-stuck sensor pixels, the second highlight model) and runs ``abu measure`` with its default
+stuck sensor pixels, the second highlight model; the view mirrored, upside down or turned a
+quarter; an exposure of 0.95 of the frame interval; strong vignetting or a light falling off
+across the frame; RGB colour frames; a 4 mm ball or a 9 mm path radius (given with --d, --l);
+black markers on white paper (``--dark-markers``); a 320 x 256 sensor; a rolling shutter read
+over a frame interval; one frame dropped from the file) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
-those with both), the median relative width, the
+those with both), the median relative width, the onset brackets [t_slip_low, t_slip_high]
+holding the simulated first slip, the
 refusals (their first words) and the median CPU time of ``abu measure`` (the process's, from
 ``wait4``; the machine may be shared).
 
@@ -26,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from multiprocessing import Pool
 from pathlib import Path
 
@@ -61,7 +67,38 @@ VARIANTS = {
     "hotpix": ({}, None, "hotpix"),
     "deadpix": ({}, None, "deadpix"),
     "alt": ({"lighting": "two_spot_alt"}, None, None),
+    "mirror": ({}, None, "mirror"),
+    "flipud": ({}, None, "flipud"),
+    "rot90": ({}, None, "rot90"),
+    "longexp": ({}, None, None),
+    "vignette": ({}, None, None),
+    "gradient": ({}, None, "gradient"),
+    "rgb": ({}, None, "rgb"),
+    "ball4mm": ({}, None, None),
+    "path9mm": ({}, None, None),
+    "darkmark": ({}, None, None),
+    "wide": ({"size": 320}, None, "crop256"),
+    "rolling": ({}, None, None),
+    "drop1": ({}, None, "drop1"),
 }
+#: variant -> the scenario changed after drawing, and the ``abu measure`` options it needs
+#: (a user states the ball's size and path radius: --d, --l)
+SCENARIO_CHANGES = {
+    # an exposure of 0.95 of the frame interval (the family: 0.1-0.5), sampled finely enough
+    "longexp": (lambda s: s.with_(optics=replace(s.optics, exposure_fraction=0.95),
+                                  blur_samples=24), []),
+    # a wide-angle lens stopped down: 1/(1+2 r^2)^2, 1/9 in the corners (the family: <= 0.5)
+    "vignette": (lambda s: s.with_(optics=replace(s.optics, vignetting=2.0)), []),
+    "ball4mm": (lambda s: s.with_(ball=replace(s.ball, d=4.0e-3)), ["--d", "0.004"]),
+    "path9mm": (lambda s: s.with_(ball=replace(s.ball, l=9.0e-3)), ["--l", "0.009"]),
+    # black markers on white paper, the paper exposed to 150 grey levels (the ball, lit as
+    # before, is then darker than the paper around it but for its highlights)
+    "darkmark": (lambda s: s.with_(albedo_bg=0.8, albedo_marker=0.08, exposure_scale=150.0),
+                 ["--dark-markers"]),
+}
+#: Rolling shutter: rows read out one after another over this fraction of a frame interval
+#: (a CMOS sensor at its full frame rate), top row first.
+ROLLING_READOUT = 1.0
 
 
 def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
@@ -74,6 +111,22 @@ def postprocess(frames: np.ndarray, how: str) -> np.ndarray:
         return np.rint(255.0 * (frames / 255.0) ** (1 / 2.2)).astype(np.uint8)
     if how == "dim":       # 0.4 of the exposure
         return np.rint(frames * 0.4).astype(np.uint8)
+    if how == "mirror":    # seen from below (or a drive turning the other way): left-right
+        return np.ascontiguousarray(frames[:, :, ::-1])
+    if how == "flipud":
+        return np.ascontiguousarray(frames[:, ::-1])
+    if how == "rot90":     # the camera turned a quarter
+        return np.ascontiguousarray(np.rot90(frames, axes=(1, 2)))
+    if how == "gradient":  # one side lamp: the light falls from 1 to 0.4 across the frame
+        ramp = np.linspace(1.0, 0.4, w, dtype=np.float32)
+        return np.rint(frames * ramp).astype(np.uint8)
+    if how == "drop1":     # frame 1000 lost on the way, the time base still even
+        return np.delete(frames, 1000, axis=0)
+    if how == "crop256":   # a 320 x 256 sensor: the middle 256 rows
+        return np.ascontiguousarray(frames[:, (h - 256) // 2:(h + 256) // 2])
+    if how == "rgb":       # a colour camera under warm light: RGB samples, blue weak
+        cast = np.array([1.0, 0.85, 0.6], dtype=np.float32)
+        return np.clip(np.rint(frames[..., None] * cast), 0, 255).astype(np.uint8)
     if how == "noisy":     # +5 grey levels of white noise
         return np.clip(np.rint(frames + rng.normal(0, 5.0, frames.shape)), 0, 255).astype(
             np.uint8)
@@ -89,31 +142,36 @@ def run(job: tuple[str, int, str]) -> dict:
     from abu_model.errors import ParameterError
     from measurement.imaging.frame_rate import tiff_metadata
     from twin.scenario import magnified, random_scenario, render_scenario_frames, \
-        scenario_meta, simulate_scenario, with_lead
+        rolling_shutter_positions, scenario_meta, simulate_scenario, with_lead
 
     variant, seed, work = job
     options, zoom, post = VARIANTS[variant]
+    change, extra = SCENARIO_CHANGES.get(variant, (None, []))
     row: dict = {"variant": variant, "seed": seed}
     lead_s = options.get("lead_s", 0.0)
     scn = random_scenario(seed, **{k: v for k, v in options.items() if k != "lead_s"})
     if zoom:
         scn = magnified(scn, zoom)
+    if change:
+        scn = change(scn)
     state, pos = simulate_scenario(scn)
     if lead_s:
         try:
             scn, state, pos = with_lead(scn, state, lead_s)
         except ParameterError:
             return {**row, "na": True}
-    frames = render_scenario_frames(scn, state, pos)
+    frames = render_scenario_frames(scn, state, rolling_shutter_positions(
+        scn, state, pos, ROLLING_READOUT) if variant == "rolling" else pos)
     if post:
         frames = postprocess(frames, post)
     meta = scenario_meta(scn, state, pos)
     d = Path(work) / f"{variant}_{seed}"
     d.mkdir(parents=True)
-    tifffile.imwrite(d / "frames.tif", frames, photometric="minisblack", contiguous=True,
+    tifffile.imwrite(d / "frames.tif", frames, contiguous=True,
+                     photometric="rgb" if frames.ndim == 4 else "minisblack",
                      metadata=tiff_metadata(scn.fps, 0.0))
     cmd = [sys.executable, "-m", "abu.cli.main", "measure", str(d / "frames.tif"), "--out",
-           str(d / "m"), "--no-plots", "--quiet"]
+           str(d / "m"), "--no-plots", "--quiet"] + extra
     if int(meta["ball_reflections"]) == 2:
         cmd += ["--ball-reflections", "2"]
     env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
@@ -129,15 +187,27 @@ def run(job: tuple[str, int, str]) -> dict:
         row["error"] = (err.strip().splitlines() or ["?"])[-1]
         return row
     lo, hi = s.get("mu_low"), s.get("mu_high")
-    row.update(status=s.get("status"), mu_low=lo, mu_high=hi)
+    row.update(status=s.get("status"), mu_low=lo, mu_high=hi, t_slip_low=s.get("t_slip_low"),
+               t_slip_high=s.get("t_slip_high"), t_slip_true=meta["simulation"]["t_slip_s"])
     if lo is not None and hi is not None:   # a null bound is counted apart, never as a hit
         row.update(covered=lo <= meta["mu"] <= hi, width=(hi - lo) / (0.5 * (hi + lo)))
     return row
 
 
+def _bracketed(r: dict) -> bool | None:
+    """Whether [t_slip_low, t_slip_high] holds the true onset (None: a bound or it missing)."""
+    lo, hi, t = r.get("t_slip_low"), r.get("t_slip_high"), r.get("t_slip_true")
+    return None if None in (lo, hi, t) else lo <= t <= hi
+
+
+def _refusal(error: str) -> str:
+    """A refusal's words, without the command's prefix and the temporary file's path."""
+    return error.split("error: ", 1)[-1].split("frames.tif", 1)[-1].lstrip(",: ")[:70]
+
+
 def report(rows: list[dict]) -> None:
     print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'null bound':>10s} {'covered':>8s} "
-          f"{'median width':>12s} {'CPU s':>6s}  refusals")
+          f"{'median width':>12s} {'onset in':>8s} {'CPU s':>6s}  refusals")
     for v in VARIANTS:
         rs = [r for r in rows if r["variant"] == v and not r.get("na")]
         na = sum(1 for r in rows if r["variant"] == v and r.get("na"))
@@ -148,10 +218,12 @@ def report(rows: list[dict]) -> None:
         ok = [r for r in rs if r["exit"] == 0]
         both = [r for r in ok if "width" in r]     # both bounds finite
         widths = [r["width"] for r in both]
-        refused = sorted({r["error"].split(":")[-1].strip()[:70] for r in rs if r["exit"]})
+        onsets = [b for b in map(_bracketed, ok) if b is not None]
+        refused = sorted({_refusal(r["error"]) for r in rs if r["exit"]})
         print(f"{v:10s} {len(rs):4d} {len(ok):8d} {len(ok) - len(both):10d} "
               f"{sum(r['covered'] for r in both):5d}/{len(both):<2d} "
               f"{100 * np.median(widths) if widths else float('nan'):11.1f}% "
+              f"{sum(onsets):5d}/{len(onsets):<2d} "
               f"{np.median([r['cpu_s'] for r in rs]):6.2f}  {'; '.join(refused)}")
 
 

@@ -27,6 +27,7 @@ import pytest
 from abu.cli.main import main
 from measurement.imaging.camera_files import read_camera_file, write_cine, write_mraw
 from measurement.imaging.frame_rate import MissingFrameRateError
+from measurement.imaging.recording_checks import RecordingError
 from measurement.imaging.frames_io import (read_recording, write_frame_folder,
                                            write_multipage_tiff, write_npy)
 from measurement.imaging.tracks_io import read_tracks_csv
@@ -256,3 +257,36 @@ def test_the_twin_at_2000_frames_per_second_holds_its_mu(twin, tmp_path, capsys)
     s = _measure(folder, tmp_path / "m", capsys)
     mu = json.loads((folder / "meta.json").read_text())["mu"]
     assert s["mu_low"] <= mu <= s["mu_high"], (s["mu_low"], s["mu_high"], mu)
+
+
+def test_cine_image_times_dropped_frames_refused_jitter_within_tolerance_read(tmp_path, capsys):
+    """A CINE's time block (tagged block 1002) records when each image was taken. The analysis
+    takes frame i at t0 + i / fps: a dropped frame (image 30 missing, so images 29 and 30 are
+    two intervals apart) is refused with exit status 2, naming the file and the block;
+    images within 1 % of an interval of the grid (a camera clock's jitter) are read."""
+    frames = _small_stack()
+    n, fps, t0 = frames.shape[0], 4500, 1.7e9
+    dropped = t0 + (np.arange(n) + (np.arange(n) >= 30)) / fps
+    path = write_cine(tmp_path / "dropped.cine", frames, fps, 8, trigger_time_unix_s=t0,
+                      image_times_s=dropped)
+    assert main(["track", str(path), "--out", str(tmp_path / "t"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "tagged block 1002" in err and "images 29 and 30" in err, err
+    assert "2 frame intervals" in err and not (tmp_path / "t").exists()
+    jitter = t0 + (np.arange(n) + np.random.default_rng(0).uniform(-0.01, 0.01, n)) / fps
+    path = write_cine(tmp_path / "jitter.cine", frames, fps, 8, trigger_time_unix_s=t0,
+                      image_times_s=jitter)
+    rec = read_recording(path)
+    assert rec.fps_hz == fps and np.array_equal(np.asarray(rec.frames), frames)
+    # at 300,000 frames/s (3.33 us apart), times kept to a 1 us clock (3 or 4 us apart) are
+    # read; a dropped frame is refused
+    fast = np.round((t0 + np.arange(n) / 300_000) * 1e6) / 1e6
+    read_recording(write_cine(tmp_path / "fast.cine", frames, 300_000, 8,
+                              trigger_time_unix_s=t0, image_times_s=fast))
+    with pytest.raises(RecordingError, match="images 9 and 10"):
+        read_recording(write_cine(tmp_path / "fast.cine", frames, 300_000, 8,
+                                  trigger_time_unix_s=t0,
+                                  image_times_s=fast + (np.arange(n) >= 10) / 300_000))
+    # the default writer's evenly spaced times, with or without a trigger time, are read
+    for kw in ({}, {"trigger_time_unix_s": t0}, {"first_image_no": -n + 1}):
+        read_recording(write_cine(tmp_path / "even.cine", frames, fps, 8, **kw))

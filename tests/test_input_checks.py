@@ -78,3 +78,39 @@ def test_time_in_ms_names_the_file():
     with pytest.raises(AbuError, match=r"tracks\.csv.*ms instead of s"):
         check_sampling(time_ms, "tracks.csv", fps_option="--fps", sg_window_s=0.02,
                        polyorder=3, estimator="savgol", trim_s=None)
+
+
+def test_a_dropped_or_repeated_frame_is_refused_a_glitch_or_a_stated_gap_is_not():
+    """The time base: on the family above (72 records, none refused: the first test), one
+    frame taken out of the frames (the times left evenly spaced, as a TIFF gives them) or one
+    frame given twice is refused naming the frames; the same gap stated in the times (a tracks
+    CSV with the true times) passes, and so does a CD marker mislocated by a whole step in one
+    frame (a tracking glitch: the next step makes up for it)."""
+    caught, n = 0, 0
+    for mu in (0.01, 0.05):
+        for kind in ("ramp", "steps"):
+            rec = simulate(mu, kind, n=1500)
+            for seed in range(3):
+                x, y = measured_pixels(rec, sigma_px=0.05, harmonic_px=0.4, seed=seed)
+                at = 300 + 250 * seed
+                keep = np.r_[0:at, at + 1:x.shape[0]]
+                # dropped: the frames after it keep the even time base
+                for xs, ys, word in ((x[keep], y[keep], "dropped"),
+                                     (np.insert(x, at, x[at], axis=0),
+                                      np.insert(y, at, y[at], axis=0), "repeated")):
+                    n += 1
+                    even = rec.time[0] + np.arange(xs.shape[0]) * (rec.time[1] - rec.time[0])
+                    first = at - 1 if word == "dropped" else at
+                    with pytest.raises(AbuError, match=rf"frames {first} and .*{word}"):
+                        check_motion_and_roles(even, xs, ys, "record")
+                    caught += 1
+                check_motion_and_roles(rec.time[keep], x[keep], y[keep], "record")   # stated
+                xg, yg = x.copy(), y.copy()
+                step = np.hypot(*(np.array([x[at + 1, 1] - x[at, 1], y[at + 1, 1] - y[at, 1]])))
+                r = np.hypot(x[at, 1] - x[at, 0], y[at, 1] - y[at, 0])
+                c, s = np.cos(step / r), np.sin(step / r)   # the CD marker one step further on
+                dx, dy = xg[at, 1] - xg[at, 0], yg[at, 1] - yg[at, 0]
+                xg[at, 1], yg[at, 1] = xg[at, 0] + c * dx + s * dy, yg[at, 0] - s * dx + c * dy
+                check_motion_and_roles(rec.time, xg, yg, "record")
+    print(f"time base: {caught} of {n} dropped or repeated frames refused")
+    assert caught == n

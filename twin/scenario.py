@@ -225,6 +225,23 @@ def marker_positions(scn: Scenario, theta: np.ndarray, beta: np.ndarray
     return {k: distort(v, scn.optics, scn.width, scn.height) for k, v in ideal.items()}
 
 
+def rolling_shutter_positions(scn: Scenario, state: dict[str, np.ndarray],
+                              pos: dict[str, np.ndarray], readout: float
+                              ) -> dict[str, np.ndarray]:
+    """``pos`` as a rolling shutter sees it: rows read top first over ``readout`` frame
+    intervals, each marker where the plant had it when its row was read (frame time + row /
+    height x readout / fps; the state's theta, beta between frames by cubic splines)."""
+    from scipy.interpolate import CubicSpline
+
+    t = scn.times
+    theta, beta = CubicSpline(t, state["theta"]), CubicSpline(t, state["beta"])
+    out = dict(pos)
+    for k in ("centre", "cd", "ball"):
+        taken = t + readout / scn.fps * pos[k][:, 1] / scn.height
+        out[k] = marker_positions(scn, theta(taken), beta(taken))[k]
+    return out
+
+
 def simulate_scenario(scn: Scenario) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """(true state per frame, marker image positions per frame)."""
     state = simulate_drive(scn.drive, scn.ball, scn.times, beta0=scn.beta0)

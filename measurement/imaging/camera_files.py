@@ -22,7 +22,11 @@ Layouts (checked against pyMRAW 0.33 and pims 0.7 ``pims/cine.py``, see the test
   ``"ST"`` at byte 140, ``Length`` at 142, ``FrameRate16`` at 0, ``FrameRate`` (uint32) at 768,
   ``RealBPP`` at 896); the pImage table (ImageCount int64 file offsets); each image: an
   annotation (uint32 AnnotationSize, AnnotationSize - 8 bytes, uint32 ImageSize), then the
-  pixels, rows bottom-up (a positive biHeight, as in a Windows bitmap).
+  pixels, rows bottom-up (a positive biHeight, as in a Windows bitmap). Between the SETUP
+  and the pImage table: tagged blocks (uint32 BlockSize, uint16 Type, uint16 reserved, data);
+  Type 1002 holds each image's time (TIME64, 32.32 fixed point). Images not evenly spaced at
+  the SETUP's rate (a dropped frame, a jittered trigger) are refused: every later stage takes
+  frame i at t0 + i / fps. A time block left zero is read as no times.
 
 Times: image number 0 is the trigger. ``first_frame_time_s`` is the time of the file's first
 frame after the trigger (negative when frames before the trigger were kept): CINE

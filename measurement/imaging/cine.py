@@ -35,6 +35,15 @@ SETUP_SIZE = 7240
 MAX_ANNOTATION = 2**20
 CINE_PACKED = {256: "packed 10-bit (log-encoded, needs Phantom's LUT)",
                1024: "packed 12-bit"}
+#: Tagged block of the images' times (TIME64 each: seconds since 1970 in 32.32 fixed point).
+TIME_BLOCK = 1002
+#: Largest departure of an image's time from an evenly spaced time base [frame intervals]: the
+#: analysis takes frame i at t0 + i / fps, so a dropped frame (a gap of 2 intervals) or an
+#: irregular trigger would put theta off by omega * dt and its second difference far more.
+TIME_BASE_TOLERANCE = 0.05
+#: ... but never below this [s]: time stamps kept to a 1 us camera clock differ by up to 2 us
+#: from their true spacing (at 300,000 frames/s, 0.6 of an interval; a dropped frame is 1).
+TIME_STAMP_SLACK_S = 2e-6
 
 
 def _unpack_at(data: bytes, offset: int, fmt: str):
@@ -132,6 +141,38 @@ def _setup(p: Path, setup: bytes, bit_count: int) -> tuple[float, str, float, in
     return fps, fps_field, rate, real_bpp
 
 
+def _image_times(blocks: bytes, n: int) -> np.ndarray | None:
+    """The images' times [s] after the first from the tagged blocks (None without a
+    complete time block)."""
+    pos = 0
+    while pos + 8 <= len(blocks):
+        block_size, kind = struct.unpack_from("<IH", blocks, pos)
+        if block_size < 8 or pos + block_size > len(blocks):
+            return None      # not tagged blocks as documented: nothing to check
+        if kind == TIME_BLOCK and block_size >= 8 + 8 * n:
+            t64 = np.frombuffer(blocks, dtype="<u8", count=n, offset=pos + 8).astype(np.int64)
+            return (t64 - t64[0]) / 2**32    # exact differences (a float of 1.7e9 s is not)
+        pos += block_size
+    return None
+
+
+def _check_image_times(p: Path, blocks: bytes, n: int, fps: float) -> None:
+    """Refuse images that are not evenly spaced at 1 / fps (dropped or repeated frames, an
+    irregular trigger): every later stage assumes frame i at t0 + i / fps."""
+    t = _image_times(blocks, n)
+    if t is None or n < 2 or not t.any():
+        return          # no time block, or one left zero (times not recorded): nothing to check
+    dt = np.diff(t) * fps    # intervals [frame intervals]
+    bad = np.flatnonzero(np.abs(dt - 1.0) > max(TIME_BASE_TOLERANCE, TIME_STAMP_SLACK_S * fps))
+    if bad.size:
+        i = int(bad[0])
+        raise CameraFileError(p, f"image times (tagged block {TIME_BLOCK})",
+                              f"images {i} and {i + 1} {dt[i] / fps * 1e6:.1f} us apart "
+                              f"({dt[i]:.3g} frame intervals; {bad.size} uneven intervals); "
+                              f"expected evenly spaced images at the SETUP's {fps:g} frames/s "
+                              "(dropped frames or an irregular trigger cannot be measured)")
+
+
 def _read_layout(p: Path, size: int) -> _CineLayout:
     """Every header of the file, checked before any image is touched."""
     try:
@@ -142,8 +183,12 @@ def _read_layout(p: Path, size: int) -> _CineLayout:
             width, height, bottom_up, bit_count = _bitmap_header(
                 p, f.read(_BITMAP_INFO.size), n)
             f.seek(off_setup)
-            fps, fps_field, rate, real_bpp = _setup(
-                p, f.read(min(65535, size - off_setup)), bit_count)  # Length is a uint16
+            setup = f.read(min(65535, size - off_setup))   # Length is a uint16
+            fps, fps_field, rate, real_bpp = _setup(p, setup, bit_count)
+            setup_end = off_setup + _unpack_at(setup, 142, "<H")
+            if off_table > setup_end:   # tagged blocks lie between the SETUP and the table
+                f.seek(setup_end)
+                _check_image_times(p, f.read(off_table - setup_end), n, fps)
             f.seek(off_table)
             offsets = np.frombuffer(f.read(8 * n), dtype="<u8").astype(np.uint64)
     except OSError as exc:
@@ -246,7 +291,8 @@ def read_cine(path: str | os.PathLike, *, mmap: bool = True
 
 def write_cine(path: str | os.PathLike, frames: np.ndarray, fps_hz: float, bit_depth: int = 8,
                *, first_image_no: int = 0, trigger_time_unix_s: float | None = None,
-               effective_bits: int | None = None, annotation_bytes: int = 0) -> Path:
+               effective_bits: int | None = None, annotation_bytes: int = 0,
+               image_times_s: np.ndarray | None = None) -> Path:
     """Write a Phantom .cine file (uncompressed monochrome, rows bottom-up), atomically.
 
     Args:
@@ -257,6 +303,8 @@ def write_cine(path: str | os.PathLike, frames: np.ndarray, fps_hz: float, bit_d
         trigger_time_unix_s: wall-clock time of the trigger (seconds since 1970, UTC).
         effective_bits: SETUP ``RealBPP`` (default ``bit_depth``).
         annotation_bytes: extra per-image annotation bytes (zeros) before each image's size.
+        image_times_s: the images' times [s since 1970] in the time block (default: evenly
+            spaced at ``fps_hz`` from the trigger); other times record dropped frames or jitter.
 
     Also writes the tagged blocks of image times (1002) and exposures (1003).
     """
@@ -288,9 +336,14 @@ def write_cine(path: str | os.PathLike, frames: np.ndarray, fps_hz: float, bit_d
         struct.pack_into(fmt, setup, offset, value)
 
     base = 0.0 if trigger_time_unix_s is None else float(trigger_time_unix_s)
-    times = np.maximum(base + (first_image_no + np.arange(n)) / fps, 0.0)
-    time64 = (np.floor(times).astype(np.uint64) << np.uint64(32)) + \
-        np.round((times % 1.0) * 2**32).clip(0, 2**32 - 1).astype(np.uint64)
+    base64 = (int(math.floor(base)) << 32) + min(int(round((base % 1.0) * 2**32)), 2**32 - 1)
+    rel_s = (first_image_no + np.arange(n)) / fps if image_times_s is None else \
+        np.asarray(image_times_s, dtype=float).reshape(n) - base
+    # 32.32 fixed point, added in integers (seconds since 1970 in a float lose 0.2 us)
+    rel64 = np.round(rel_s * 2**32).astype(np.int64)
+    if trigger_time_unix_s is None:   # no clock: times from 0 (none before 1970, none equal)
+        base64 = max(0, -int(rel64.min()))
+    time64 = np.maximum(base64 + rel64, 0).astype(np.uint64)
     exposure = np.full(n, int(0.5 / fps * 2**32), dtype="<u4")
     tagged = (struct.pack("<IHH", 8 + 8 * n, 1002, 1) + time64.astype("<u8").tobytes()
               + struct.pack("<IHH", 8 + 4 * n, 1003, 0) + exposure.tobytes())
@@ -300,8 +353,7 @@ def write_cine(path: str | os.PathLike, frames: np.ndarray, fps_hz: float, bit_d
     off_table = off_setup + SETUP_SIZE + len(tagged)
     first_image = off_table + 8 * n
     offsets = first_image + np.arange(n, dtype=np.uint64) * (ann_size + image_bytes)
-    trigger64 = 0 if trigger_time_unix_s is None else \
-        (int(math.floor(base)) << 32) + min(int(round((base % 1.0) * 2**32)), 2**32 - 1)
+    trigger64 = 0 if trigger_time_unix_s is None else base64   # 0: unknown
     head = _CINE_HEADER.pack(b"CI", _CINE_HEADER.size, 0, 1, int(first_image_no), n,
                              int(first_image_no), n, off_bih, off_setup, off_table, trigger64)
     bih = _BITMAP_INFO.pack(_BITMAP_INFO.size, w, h, 1, bit_depth, 0, image_bytes, 0, 0, 0, 0)

@@ -10,6 +10,11 @@ refuse, with a message naming the option or the file, the inputs it would silent
 * **trim**: ``--trim-s`` must leave a trusted region;
 * **motion**: the CD marker must turn (the normal force is m l omega^2: a still ABU makes any
   friction look infinite);
+* **time base**: the ABU's inertia cannot double or stop its turn for one frame; a single step
+  of the CD marker's angle that is a whole multiple (>= 2) or none of its neighbours' while
+  those are normal is a dropped or a repeated frame (a TIFF or a folder records no frame
+  times), which the analysis would take as a speed spike and widen mu's interval to nothing
+  (one frame dropped from a 3072-frame render: [0, 0.24] for mu = 0.024);
 * **roles**: friction can only drag the ball after the disc, so while the ABU accelerates the
   ball may lag behind the CD marker, never run ahead of it; a "ball" that runs ahead of the
   "CD marker" means the two are swapped (seed order or CSV columns).
@@ -31,6 +36,15 @@ MIN_MEAN_SPEED = math.pi
 #: Net change of beta [rad] above which its sign is trusted for the role check (tracking noise
 #: ~3e-4 rad per frame, averaged over a revolution; a slip moves beta by 1e-2 to 3e-1 rad).
 MIN_BETA_CHANGE = 4e-3
+
+
+#: Frames either side in the running median of the CD marker's speed (the time-base check).
+STEP_MEDIAN_HALF = 8
+#: How close a step's ratio to its neighbours' must come to a whole number to read as frames
+#: dropped (2, 3, ...) or repeated (0), and its neighbours' to 1 [-].
+STEP_RATIO_SLACK = 0.25
+#: ... and how far above the speed's frame-to-frame noise it must stand [robust sigmas].
+STEP_NOISE_SIGMAS = 10.0
 
 
 class MeasurementInputError(AbuError, ValueError):
@@ -100,8 +114,40 @@ def _end_windows(theta: np.ndarray) -> tuple[slice, slice] | None:
     return slice(0, max(k1, 3)), slice(n - max(k2, 3), n)
 
 
+def _check_time_base(time: np.ndarray, theta: np.ndarray, source: str) -> None:
+    """Refuse single-frame steps of the CD marker that read as dropped or repeated frames."""
+    from scipy.ndimage import median_filter
+
+    if theta.size < 4 * STEP_MEDIAN_HALF:
+        return
+    speed = np.diff(theta) / np.diff(time)           # [rad/s] per interval
+    typical = median_filter(speed, size=2 * STEP_MEDIAN_HALF + 1, mode="nearest")
+    dev = speed - typical
+    sigma = 1.4826 * float(np.median(np.abs(dev - np.median(dev))))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = speed / typical
+    whole = np.rint(ratio)
+    odd = (np.abs(ratio - whole) < STEP_RATIO_SLACK) & (whole != 1) & (whole >= 0) \
+        & (np.abs(dev) > STEP_NOISE_SIGMAS * sigma)
+    normal = np.abs(ratio - 1.0) < STEP_RATIO_SLACK
+    odd[1:-1] &= normal[:-2] & normal[2:]             # neighbours normal: not a tracking glitch
+    odd[[0, -1]] = False
+    bad = np.flatnonzero(odd)
+    if bad.size:
+        i = int(bad[0])
+        raise MeasurementInputError(
+            f"{source}: between frames {i} and {i + 1} (t = {time[i]:.6g} s) the CD marker turned "
+            f"{ratio[i]:.2f}x the step of the frames around ({bad.size} such step"
+            f"{'s' if bad.size > 1 else ''}): a frame {'repeated' if whole[i] == 0 else 'dropped'}"
+            "? The ABU cannot change its speed so in one frame, and the analysis takes the frames "
+            "as evenly spaced: measure a recording without gaps (a camera file's image times are "
+            "checked), or give a tracks CSV with the true times")
+
+
 def check_motion_and_roles(time: np.ndarray, x: np.ndarray, y: np.ndarray, source: str) -> None:
-    """The ABU turns, and the ball never runs ahead of the CD marker while the ABU accelerates.
+    """The ABU turns, its frames are evenly spaced (no single-frame step a whole multiple or
+    none of its neighbours'), and the ball never runs ahead of the CD marker while the ABU
+    accelerates.
 
     Raises:
         MeasurementInputError: naming ``source`` (the recording or tracks file).
@@ -115,6 +161,7 @@ def check_motion_and_roles(time: np.ndarray, x: np.ndarray, y: np.ndarray, sourc
             f"Hz over {duration:.4g} s; at least {MIN_MEAN_SPEED / (2 * math.pi):g} Hz): the "
             "normal force m l omega^2 vanishes and no bound on mu follows; are these markers "
             "on the rotating ABU?")
+    _check_time_base(time, theta, source)
     # Mean speed and mean beta over the first and the last full revolution: whole turns average
     # out the lighting harmonic of beta (over a part of a turn it moved beta by 0.02 rad in the
     # twin). A record of less than two turns is not checked.
