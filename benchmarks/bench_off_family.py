@@ -8,7 +8,7 @@ stuck sensor pixels, the second highlight model; the view mirrored, upside down 
 quarter; an exposure of 0.95 of the frame interval; strong vignetting or a light falling off
 across the frame; RGB colour frames; a 4 mm ball or a 9 mm path radius (given with --d, --l);
 black markers on white paper (``--dark-markers``); a 320 x 256 sensor; a rolling shutter read
-over a frame interval; one frame dropped from the file) and runs ``abu measure`` with its default
+over a frame interval (``rolling_lt``: with ``--line-time`` stated); one frame dropped from the file) and runs ``abu measure`` with its default
 options (``--ball-reflections 2`` where the ball shows two). Printed per variant: runs,
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
 those with both), the median relative width, the onset brackets [t_slip_low, t_slip_high]
@@ -79,6 +79,7 @@ VARIANTS = {
     "darkmark": ({}, None, None),
     "wide": ({"size": 320}, None, "crop256"),
     "rolling": ({}, None, None),
+    "rolling_lt": ({}, None, None),
     "drop1": ({}, None, "drop1"),
 }
 #: variant -> the scenario changed after drawing, and the ``abu measure`` options it needs
@@ -160,8 +161,11 @@ def run(job: tuple[str, int, str]) -> dict:
             scn, state, pos = with_lead(scn, state, lead_s)
         except ParameterError:
             return {**row, "na": True}
+    rolling = variant in ("rolling", "rolling_lt")
     frames = render_scenario_frames(scn, state, rolling_shutter_positions(
-        scn, state, pos, ROLLING_READOUT) if variant == "rolling" else pos)
+        scn, state, pos, ROLLING_READOUT) if rolling else pos)
+    if variant == "rolling_lt":   # the camera's line time stated: abu measure --line-time
+        extra = extra + ["--line-time", repr(ROLLING_READOUT / scn.fps / scn.height)]
     if post:
         frames = postprocess(frames, post)
     meta = scenario_meta(scn, state, pos)

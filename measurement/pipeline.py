@@ -335,6 +335,9 @@ def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float
     check_marker_geometry(tracks.x_px, tracks.y_px, source)
     check_motion_and_roles(tracks.time_s, tracks.x_px, tracks.y_px, source)
     x, y, camera_info = tracks.x_px, tracks.y_px, None
+    if options.line_time_s:   # a rolling shutter: each marker back to the frame times
+        from measurement.imaging.rolling_shutter import positions_at_frame_times
+        x, y = positions_at_frame_times(tracks.time_s, x, y, options.line_time_s)
     if options.harmonic_orders_alternative is None:   # chosen by the ball's highlights
         options = replace(options, harmonic_orders_alternative=alternative_orders(
             tracks.info.get("ball_reflections")))
@@ -347,7 +350,8 @@ def measure_tracks(tracks: MarkerTracks, *, l_m: float = DEFAULT_L_M, d_m: float
                 options.inference, theta_harmonic_rad=float(prior)))
     table, summary = analyse_tracks(tracks.time_s, x, y, l=l_m, d=d_m, lost=tracks.lost,
                                     options=options)
-    summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": tracks.info,
+    info = {**tracks.info, **({"line_time_s": options.line_time_s} if options.line_time_s else {})}
+    summary = {"kind": SUMMARY_KIND, "format_version": SUMMARY_VERSION, "input": info,
                **summary, **({"camera": camera_info} if camera_info else {})}
     # a lossy recording is named in the status (the bounds are not coverage-tested on it)
     summary["status"] = lossy_status(summary["status"], tracks.info.get("compression"))
@@ -408,15 +412,6 @@ def measure_tracks_file(path: str | Path, *, fps_hz: float | None = None,
 
 # ------------------------------------------------------------------------------ writing
 
-def kinematics_csv_text(table: dict[str, np.ndarray]) -> str:
-    """CSV text of a table of equal-length columns (names carry the units)."""
-    names = list(table)
-    # Plain CSV (no comment line): units are in the column names (_s, _rad, _rad_s, _rad_s2);
-    # mu_* and running_max_* are dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball;
-    # non-finite values are empty cells.
-    return tracks_io.table_csv_text(names, [np.asarray(table[n]) for n in names])
-
-
 def write_measurement(result: MeasureResult, out_dir: str | Path, *,
                       plots: bool = True, figure_format: str = "png") -> list[Path]:
     """Write ``tracks.csv``, ``kinematics.csv``, the figures (``beta`` and ``kinematics``,
@@ -428,7 +423,10 @@ def write_measurement(result: MeasureResult, out_dir: str | Path, *,
     t = result.tracks
     theta, beta = result.table["theta_rad"], result.table["beta_rad"]
     tracks_text = tracks_io.format_tracks_csv(t.time_s, theta, beta, t.x_px, t.y_px, t.lost)
-    table_text = kinematics_csv_text(result.table)
+    # plain CSV: units in the column names (_s, _rad, _rad_s, _rad_s2); mu_* and running_max_*
+    # dimensionless; trusted 0/1; lost bit mask 1 center 2 cd 4 ball; non-finite: empty cells
+    table_text = tracks_io.table_csv_text(list(result.table),
+                                          [np.asarray(v) for v in result.table.values()])
     summary_text = dumps(result.summary)
     written = [out / "tracks.csv", out / "kinematics.csv"]
     atomic_write_text(written[0], tracks_text)

@@ -255,6 +255,7 @@ for opt, values in {"--trim-s": ["10", "-1", "nan"], "--sg-window-s": ["0", "nan
                     "--k-sigma": ["0", "nan", "1e9"], "--mc-draws": ["-1", "10000000"],
                     "--l": ["0", "nan", "-1", "1e300"], "--d": ["0", "1", "nan", "1e300"],
                     "--seed": ["-1"], "--max-fit-samples": ["10", "100000"],
+                    "--line-time": ["nan", "0.01", "-1"],
                     "--fps": ["1e9", "nan"], "--estimator": ["magic"], "--lower": ["x"]}.items():
     for v in values:
         case(MT + [opt, v], opt)

@@ -108,7 +108,9 @@ def _analysis_options(args: argparse.Namespace):
             max_fit_samples=integer_range(
                 "--max-fit-samples", args.max_fit_samples, 256, 16384,
                 "samples of the model fit's window; its noise covariance takes ~50 n^2 bytes")),
-        kinematics=args.kinematics, drive_model=drive_model_from_args(args))
+        kinematics=args.kinematics, drive_model=drive_model_from_args(args),
+        line_time_s=in_range("--line-time", args.line_time, -1e-3, 1e-3, "s",
+                             "a rolling shutter's read-out time per sensor row"))
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
@@ -272,6 +274,10 @@ def register(subparsers) -> None:
                         "(default 0: the model's profile likelihood is the uncertainty)")
     p.add_argument("--confidence", type=float, default=0.95,
                    help="level of the confidence sets on mu and mu_d (default 0.95)")
+    p.add_argument("--line-time", type=float, default=0.0,
+                   help="a rolling shutter's read-out time per sensor row [s] (negative: the "
+                        "bottom row first; default 0: a global shutter): the tracked positions "
+                        "are brought back to the frame times")
     p.add_argument("--max-fit-samples", type=int, default=3072,
                    help="most samples of the model fit's window (default 3072); a longer one "
                         "(a late slip in a long record) is cut around the slip's first move: "
@@ -307,4 +313,5 @@ def register(subparsers) -> None:
 OPTION_OF = {"sg_window_s": "--sg-window-s", "window": "--window", "trim_s": "--trim-s",
              "poly_degree": "--poly-degree", "k_sigma": "--k-sigma", "mc_draws": "--mc-draws",
              "fps": "--fps", "bins": "--bins", "l": "--l", "d": "--d", "seeds": "--seeds",
-             "method": "--method", "max_fit_samples": "--max-fit-samples"}
+             "method": "--method", "max_fit_samples": "--max-fit-samples",
+             "line_time_s": "--line-time"}

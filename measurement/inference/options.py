@@ -63,6 +63,10 @@ class AnalysisOptions:
             omega_dot from the known drive fitted to the whole record, the estimator's where
             the fit is refused; :mod:`measurement.kinematics.drive_model`).
         drive_model: the drive and staircase (``DriveModelInput``) for ``drive-model``.
+        line_time_s: a rolling shutter's read-out time per sensor row [s/row] (negative: the
+            bottom row first; 0, the default: a global shutter): the tracked positions are
+            brought back to the frame times before the analysis
+            (:func:`measurement.imaging.rolling_shutter.positions_at_frame_times`).
     """
 
     estimator: str = "savgol"
@@ -90,6 +94,7 @@ class AnalysisOptions:
     max_lost_fraction: float = 0.02
     kinematics: str = "savgol"
     drive_model: Any = None
+    line_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.estimator not in kin_mod.ESTIMATORS:
@@ -119,6 +124,9 @@ class AnalysisOptions:
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
         if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
             raise ParameterError("trim_s", self.trim_s, ">= 0 s")
+        if not (math.isfinite(self.line_time_s) and abs(self.line_time_s) <= 1e-3):
+            raise ParameterError("line_time_s", self.line_time_s,
+                                 "a read-out time per sensor row in [-1e-3, 1e-3] s")
 
     def with_(self, **changes: Any) -> "AnalysisOptions":
         """A copy with ``changes`` applied (validated again)."""
