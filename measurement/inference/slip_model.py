@@ -25,8 +25,8 @@ except ImportError:  # pragma: no cover - the NumPy reference gives the same res
 def slip_direction(omega: np.ndarray, omega_dot: np.ndarray, trusted: np.ndarray) -> int:
     """Slip direction s of beta [-]: +1 while the ABU accelerates clockwise (omega_dot < 0),
     -1 the other way: the sign opposite to the median omega_dot [rad/s^2] over the trusted
-    samples up to the top speed whose |mu_req| (omega_dot / omega^2, omega [rad/s]) is at
-    least half its largest there.
+    samples whose |mu_req| (omega_dot / omega^2, omega [rad/s]) is at least half its largest.
+    (Not "the run-up only": the report's recommended drive sweeps mu_req by braking.)
 
     The ball slips where |mu_req| is large: those samples decide. The median over the whole
     record let a long one that ends with the drive settling at its last speed decide by the
@@ -38,13 +38,7 @@ def slip_direction(omega: np.ndarray, omega_dot: np.ndarray, trusted: np.ndarray
     trusted = np.asarray(trusted, bool)
     if not trusted.any():
         return 1
-    w = np.abs(np.asarray(omega, float))
-    # the run-up: a run-down after the top speed has the ball slip back, at mu_req that grows
-    # as omega falls
-    idx = np.flatnonzero(trusted)
-    trusted = trusted.copy()
-    trusted[idx[int(np.argmax(w[idx])) + 1:]] = False
-    q = np.abs(od) / np.maximum(w ** 2, 1e-12)
+    q = np.abs(od) / np.maximum(np.asarray(omega, float) ** 2, 1e-12)
     top = trusted & (q >= 0.5 * float(np.max(q[trusted])))
     return -1 if float(np.median(od[top])) > 0 else 1
 
