@@ -140,3 +140,21 @@ def test_markers_that_leave_no_window_are_refused_with_the_numbers(tmp_path):
     code = main(["track", str(path), "--fps", "4500", "--out", str(tmp_path / "t"), "--quiet",
                  "--seeds", ";".join(f"{x:.2f},{y:.2f}" for x, y in seeds)])
     assert code == 2 and not (tmp_path / "t").exists()
+
+
+def test_a_fast_marker_near_the_ball_gets_the_one_step_room():
+    """A designed braking run at 40 Hz (bench_profile_drive seed 207): the CD marker of 6.8 px
+    outer radius moves 5 px a frame, the ball passes 36.1 px from the centre and 52.6 px from
+    the CD marker. Two steps of room want 38.5 px, the distances allow 38.9 (no whole window);
+    one step (the tracker predicts the motion from frame 2 on) wants 28.6: a window is chosen,
+    not a refusal (the family's 30 px tracked it)."""
+    from measurement.imaging.window_size import MarkerExtent, hold_px, window_from_extents
+    seeds = np.array([[128.67, 127.04], [217.34, 126.99], [128.32, 90.96]])
+    extents = [MarkerExtent(6.0, 0.1, 100.0), MarkerExtent(6.8, 5.0, 100.0),
+               MarkerExtent(4.5, 5.0, 100.0)]
+    assert hold_px(extents[1]) > 38.0 and hold_px(extents[1], 1.0) < 30.0
+    choice = window_from_extents(seeds, extents, 256)
+    assert hold_px(extents[1], 1.0) <= choice.window_px <= choice.allows_px
+    # a static marker too large for its gap is still refused (one step of nothing is nothing)
+    with pytest.raises(WindowError):
+        window_from_extents(seeds, [MarkerExtent(20.0, 0.0, 100.0), *extents[1:]], 256)

@@ -175,11 +175,12 @@ def marker_extents(frames: np.ndarray, seeds: np.ndarray) -> list[MarkerExtent]:
 ROUNDING_PX = 0.5
 
 
-def hold_px(extent: MarkerExtent) -> float:
+def hold_px(extent: MarkerExtent, margin: float = MOTION_MARGIN) -> float:
     """Smallest window [px] that holds a marker: (w / 2 - RING_PX) - ROUNDING_PX >= R + 2 v
     (the short side of an even window reaches w / 2 - 1 px from its centre pixel, the ring's
-    inner pixels w / 2 - 2), and the seeded pass's jump limit w / 3 above 2 v."""
-    e = MOTION_MARGIN * extent.step_px
+    inner pixels w / 2 - 2), and the seeded pass's jump limit w / 3 above 2 v (``margin``
+    steps v instead of 2)."""
+    e = margin * extent.step_px
     return max(2.0 * (extent.outer_px + RING_PX + ROUNDING_PX + e), 3.0 * e)
 
 
@@ -231,6 +232,12 @@ def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent],
     allows = min(reach_limit_px(g, outer[j]) for g, j in pairs)
     low = max(MIN_WINDOW_PX, math.ceil(needs - 1e-9))
     high = min(MAX_WINDOW_PX, frame_px, math.floor(allows + 1e-9))
+    if low > high:
+        # two steps of room are ample, one is the least (the tracker predicts the motion from
+        # frame 2 on): the family's window tracked a designed braking run at 40 Hz whose CD
+        # marker (6.8 px, 5 px a frame) the two-step rule wanted in 39 px with 38.9 allowed
+        low = max(MIN_WINDOW_PX, math.ceil(max([hold_px(e, 1.0) for e in measured],
+                                               default=float(MIN_WINDOW_PX)) - 1e-9))
     if low > high:
         worst = int(np.argmax([hold_px(e) if e.outer_px is not None else 0.0
                                for e in extents]))
