@@ -238,6 +238,9 @@ def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent],
         # marker (6.8 px, 5 px a frame) the two-step rule wanted in 39 px with 38.9 allowed
         low = max(MIN_WINDOW_PX, math.ceil(max([hold_px(e, 1.0) for e in measured],
                                                default=float(MIN_WINDOW_PX)) - 1e-9))
+        # still too tight for the motion, but the family's window reaches no other marker:
+        # track with it as before this rule existed (the tracker's own checks then decide)
+        low = min(low, FAMILY_WINDOW_PX) if high >= FAMILY_WINDOW_PX else low
     if low > high:
         worst = int(np.argmax([hold_px(e) if e.outer_px is not None else 0.0
                                for e in extents]))
