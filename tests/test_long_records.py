@@ -130,8 +130,9 @@ def test_a_record_within_the_cap_is_not_cut():
 
 
 def test_the_cap_is_checked():
-    with pytest.raises(ParameterError, match="max_fit_samples"):
-        InferenceOptions(max_fit_samples=10)
+    for bad in (10, 3000.5, float("nan"), True, "3072"):
+        with pytest.raises(ParameterError, match="max_fit_samples"):
+            InferenceOptions(max_fit_samples=bad)
     assert AnalysisOptions().inference.max_fit_samples == 3072
 
 

@@ -108,3 +108,11 @@ def test_abu_measure_line_time_brings_the_tracks_to_the_frame_times(tmp_path):
     print(f"theta vs the global shutter's [rad]: corrected {errors['corrected']:.2e}, raw "
           f"{errors['raw']:.2e} (the noise itself {th_noise:.2e})")
     assert errors["corrected"] < th_noise and errors["raw"] > 5 * th_noise
+
+
+def test_the_line_time_option_is_checked():
+    from measurement.inference.options import AnalysisOptions
+    for bad in (float("nan"), float("inf"), 0.01, -1.0, "1e-6", True):
+        with pytest.raises(ParameterError, match="line_time_s"):
+            AnalysisOptions(line_time_s=bad)
+    assert AnalysisOptions(line_time_s=-2e-7).line_time_s == -2e-7

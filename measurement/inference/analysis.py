@@ -46,8 +46,7 @@ def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> ki
         kin = drive_model.apply(kin, theta, opt.drive_model)
     # the ball model needs the ABU spinning (a stop or reversal leaves the trusted run)
     trusted = spinning_run(kin.omega, kin.trusted)
-    return kin if trusted is kin.trusted or np.array_equal(trusted, kin.trusted) \
-        else replace(kin, trusted=trusted)
+    return kin if trusted is kin.trusted else replace(kin, trusted=trusted)
 
 
 def _estimator(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:

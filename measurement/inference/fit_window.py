@@ -107,6 +107,22 @@ def candidate_grid(region: TrustedRegion, opt: InferenceOptions
     return mu_grid, ratios
 
 
+def first_move(region: TrustedRegion, deviation: np.ndarray | None, sigmas: float,
+               opt: InferenceOptions) -> int | None:
+    """First sample of ``region`` where the data (harmonic-cleaned, smoothed ``deviation``
+    [rad] over the record) have moved ``sigmas`` white-noise sigmas of beta from where they
+    were at the region's start; None: never (or no deviation given)."""
+    if deviation is None:
+        return None
+    # floor: noise-free tracks would end the window before the slip is visible
+    sig_b = max(noise_level(region.window.beta), float(opt.sigma_floor_rad))
+    dev = np.asarray(deviation, float)[region.window.region]
+    # moved from where it was at the start of the trusted region (not from the stick level of
+    # the record's first frames: the ball may already slide there)
+    moved = np.flatnonzero(np.abs(dev - dev[0]) > sigmas * sig_b)
+    return int(moved[0]) if moved.size else None
+
+
 def fit_window(region: TrustedRegion, deviation: np.ndarray | None,
                opt: InferenceOptions) -> Window:
     """The trusted region cut where the data have left the stick level.
@@ -118,17 +134,9 @@ def fit_window(region: TrustedRegion, deviation: np.ndarray | None,
     ``window_sigmas`` white-noise sigmas of beta from the stick level.
     """
     win = region.window
-    t, y, x = win.t, win.beta, win.x
-    n_fit = t.size
-    if deviation is not None:
-        # floor: noise-free tracks would end the window before the slip is visible
-        sig_b = max(noise_level(y), float(opt.sigma_floor_rad))
-        dev = np.asarray(deviation, float)[win.region]
-        # moved from where it was at the start of the trusted region (not from the stick
-        # level of the record's first frames: the ball may already slide there)
-        moved = np.flatnonzero(np.abs(dev - dev[0]) > opt.window_sigmas * sig_b)
-        if moved.size:
-            n_fit = int(moved[0]) + 1
+    t, x = win.t, win.x
+    moved = first_move(region, deviation, opt.window_sigmas, opt)
+    n_fit = t.size if moved is None else moved + 1
     # at least 20 ms: a ball already moving at the start must be seen to move
     n_fit = max(n_fit, min(t.size, max(2 * x.shape[1] + 40, int(round(0.02 / (t[1] - t[0]))))))
     return win.head(n_fit)
@@ -163,13 +171,9 @@ def capped_window(region: TrustedRegion, win: Window, deviation: np.ndarray | No
         return region, win, {}
     end = win.t.size
     if end == region.window.t.size:
-        anchor = int(np.argmax(win.q))
-        if deviation is not None:
-            sig_b = max(noise_level(region.window.beta), float(opt.sigma_floor_rad))
-            dev = np.asarray(deviation, float)[win.region]
-            moved = np.flatnonzero(np.abs(dev - dev[0]) > _MOVE_SIGMAS * sig_b)
-            if moved.size:
-                anchor = int(moved[0])
+        anchor = first_move(region, deviation, _MOVE_SIGMAS, opt)
+        if anchor is None:
+            anchor = int(np.argmax(win.q))
         end = min(end, max(anchor + n_max // 4, n_max))
     region = region.from_sample(end - n_max)
     # the later region's window: the same end where the data left the stick level (now

@@ -124,7 +124,8 @@ class AnalysisOptions:
         check_positive("knot_spacing_s", self.knot_spacing_s, "s")
         if self.trim_s is not None and not (math.isfinite(self.trim_s) and self.trim_s >= 0):
             raise ParameterError("trim_s", self.trim_s, ">= 0 s")
-        if not (math.isfinite(self.line_time_s) and abs(self.line_time_s) <= 1e-3):
+        if isinstance(self.line_time_s, bool) or not isinstance(self.line_time_s, numbers.Real) \
+                or not (math.isfinite(self.line_time_s) and abs(self.line_time_s) <= 1e-3):
             raise ParameterError("line_time_s", self.line_time_s,
                                  "a read-out time per sensor row in [-1e-3, 1e-3] s")
 

@@ -5,6 +5,7 @@ name the options and read the result without the numerics.
 """
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,8 +90,10 @@ class InferenceOptions:
             raise ParameterError("confidence", self.confidence, "a level in [0.5, 1)")
         if int(self.n_mu) < 8 or int(self.n_mu_d) < 2:
             raise ParameterError("n_mu", (self.n_mu, self.n_mu_d), "grids of >= 8 and >= 2")
-        if int(self.max_fit_samples) < 256:
-            raise ParameterError("max_fit_samples", self.max_fit_samples, ">= 256 samples")
+        if isinstance(self.max_fit_samples, bool) or not isinstance(
+                self.max_fit_samples, numbers.Integral) or self.max_fit_samples < 256:
+            raise ParameterError("max_fit_samples", self.max_fit_samples,
+                                 "an integer >= 256 [samples]")
 
 
 @dataclass
