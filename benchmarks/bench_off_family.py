@@ -13,8 +13,9 @@ options (``--ball-reflections 2`` where the ball shows two). Printed per variant
 measured, measured with a null bound, intervals with both bounds holding the true mu (of
 those with both), the median relative width, the onset brackets [t_slip_low, t_slip_high]
 holding the simulated first slip, the
-refusals (their first words) and the median CPU time of ``abu measure`` (the process's, from
-``wait4``; the machine may be shared).
+refusals (their first words), the median CPU time of ``abu measure`` (the process's, from
+``wait4``; the machine may be shared) and the largest peak RSS of its runs [MB] (memory-mapped
+frames included).
 
     nice python benchmarks/bench_off_family.py --first 20000 --seeds 4 --jobs 2
     nice python benchmarks/bench_off_family.py --variants fps1500,hotpix --seeds 8
@@ -53,6 +54,7 @@ VARIANTS = {
     "fps12000": ({"fps": 12000.0, "n_frames": round(DUR_S * 12000)}, None, None),
     "long6000": ({"n_frames": 6000}, None, None),
     "long12000": ({"n_frames": 12000}, None, None),
+    "long20000": ({"n_frames": 20000}, None, None),
     "lead1.5": ({"lead_s": 1.5}, None, None),
     "size200": ({"size": 200}, None, None),
     "size512": ({"size": 512}, None, None),
@@ -183,7 +185,8 @@ def run(job: tuple[str, int, str]) -> dict:
     err = p.stderr.read().decode(errors="replace")
     _, status, usage = os.wait4(p.pid, 0)
     row.update(mu=meta["mu"], exit=os.waitstatus_to_exitcode(status),
-               cpu_s=usage.ru_utime + usage.ru_stime)
+               cpu_s=usage.ru_utime + usage.ru_stime,
+               peak_mb=usage.ru_maxrss / 1024.0)   # peak RSS of abu measure [MB] (Linux: kB)
     summary = d / "m" / "summary.json"
     s = json.loads(summary.read_text()) if row["exit"] == 0 else None
     shutil.rmtree(d)   # a 512 px or 16-bit recording is 0.4-0.8 GB: one at a time on disk
@@ -211,7 +214,7 @@ def _refusal(error: str) -> str:
 
 def report(rows: list[dict]) -> None:
     print(f"{'variant':10s} {'runs':>4s} {'measured':>8s} {'null bound':>10s} {'covered':>8s} "
-          f"{'median width':>12s} {'onset in':>8s} {'CPU s':>6s}  refusals")
+          f"{'median width':>12s} {'onset in':>8s} {'CPU s':>6s} {'peak MB':>7s}  refusals")
     for v in VARIANTS:
         rs = [r for r in rows if r["variant"] == v and not r.get("na")]
         na = sum(1 for r in rows if r["variant"] == v and r.get("na"))
@@ -228,7 +231,8 @@ def report(rows: list[dict]) -> None:
               f"{sum(r['covered'] for r in both):5d}/{len(both):<2d} "
               f"{100 * np.median(widths) if widths else float('nan'):11.1f}% "
               f"{sum(onsets):5d}/{len(onsets):<2d} "
-              f"{np.median([r['cpu_s'] for r in rs]):6.2f}  {'; '.join(refused)}")
+              f"{np.median([r['cpu_s'] for r in rs]):6.2f} "
+              f"{max(r['peak_mb'] for r in rs):7.0f}  {'; '.join(refused)}")
 
 
 def main() -> None:
