@@ -52,7 +52,7 @@ def one(seed: int, lighting: str | None) -> dict | None:
     got = tracked(seed, lighting)
     if isinstance(got, int) or got[0].drive.kind != "staircase_pi":
         return None
-    scn, state, tr, known = got
+    scn, state, tr, (known, _) = got   # the drive known (not the loop-unknown options)
     t = tr.time
     x, y = _fill_lost(t, tr.x, tr.y, tr.lost, AnalysisOptions())
     theta, _ = tracks_io.angles_from_pixels(*fixed_axis(x, y))   # as the analysis does

@@ -45,6 +45,10 @@ ratio to ``exact, no lens prior`` (issue 18's reference with a camera) and to ``
 kinematics``, and the calibration's figures. ``--out`` keeps the per-recording rows (JSON
 lines), ``--report`` prints their tables again.
 
+``loop unknown``: the same without ``--drive`` (the loop fitted freely from the record,
+:mod:`measurement.kinematics.unknown_loop`; staircases with ``--controller-sample-time`` the
+frame interval, the twin's controller rate).
+
 Measured (seeds 0..99 + 10 two-spot): median width default 34.6 %, exact kinematics 18.7 %,
 ``known drive`` 19.4 % (1.01x exact; staircase 1.08x, profile 0.94x: the profile model fits
 theta's harmonics and drops the lens prior the exact row keeps), coverage 100 %, no miss > 2 %;
@@ -114,6 +118,7 @@ from lens_calibration import calibrate  # noqa: E402
 
 MEASURED_KINEMATICS = analysis._kinematics
 KNOWN = "known drive"
+UNKNOWN = "loop unknown"
 EXACT, NO_LENS = "exact kinematics", "exact, no lens prior"
 #: ``--camera`` rows: name -> (``known drive`` options instead of the default, exact kinematics)
 CAMERA_ROWS = {"default + camera": (False, False), "known drive + camera": (True, False),
@@ -144,11 +149,14 @@ def exact_kinematics(state: dict):
     return kinematics
 
 
-def known_drive_options(scn, folder: Path) -> AnalysisOptions:
+def known_drive_options(scn, folder: Path) -> tuple[AnalysisOptions, AnalysisOptions]:
     """``abu measure --kinematics drive-model --drive drive.json [--profile profile.json]
-    [staircase]`` for the scenario's true drive, through the command line's own parsing."""
+    [staircase]`` for the scenario's true drive, through the command line's own parsing; and
+    the same without ``--drive`` (the ``loop unknown`` row: the staircase with
+    ``--controller-sample-time`` the frame interval, or the profile, the loop fitted freely)."""
     spec, drive_json = scn.drive, folder / "drive.json"
-    ns = argparse.Namespace(kinematics="drive-model", drive=str(drive_json), profile=None)
+    ns = argparse.Namespace(kinematics="drive-model", drive=str(drive_json), profile=None,
+                            controller_sample_time=None)
     if spec.kind == "staircase_pi":   # the loop as bench_drive_model.py states it
         drive = Drive(model="pi-lag-weighted", zeta=spec.zeta, omega_n=spec.omega_n,
                       tau_motor=max(spec.tau_motor, 1e-5),
@@ -168,7 +176,12 @@ def known_drive_options(scn, folder: Path) -> AnalysisOptions:
             source="twin profile drive")))
         ns.profile = str(folder / "profile.json")
     drive_json.write_text(dumps_drive(drive))
-    return AnalysisOptions(kinematics="drive-model", drive_model=drive_model_from_args(ns))
+    unknown = argparse.Namespace(**{**vars(ns), "drive": None})
+    if spec.kind == "staircase_pi":   # the twin's controller samples at the frame rate
+        unknown.controller_sample_time = 1.0 / scn.fps
+    return (AnalysisOptions(kinematics="drive-model", drive_model=drive_model_from_args(ns)),
+            AnalysisOptions(kinematics="drive-model",
+                            drive_model=drive_model_from_args(unknown)))
 
 
 def tracked(seed: int, lighting: str | None):
@@ -234,9 +247,14 @@ def one(job: tuple[int, str | None, int]) -> dict:
     for name, (opt, exact) in ANALYSES.items():
         s = summary(scn, tracks, opt, state if exact else None)
         row["bounds"][name] = (s["mu_low"], s["mu_high"])
+    known, unknown = known
     s = summary(scn, tracks, known)
     row["bounds"][KNOWN] = (s["mu_low"], s["mu_high"])
     row["model"], row["why"] = s["estimator"].get("model"), s["estimator"].get("why", "")
+    s = summary(scn, tracks, unknown)
+    row["bounds"][UNKNOWN] = (s["mu_low"], s["mu_high"])
+    row["model_unknown"] = s["estimator"].get("model")
+    row["why_unknown"] = s["estimator"].get("why", "")
     if views:
         camera, row["cal"] = calibrated_camera(scn, views)
         for name, (drive_known, exact) in CAMERA_ROWS.items():
@@ -279,7 +297,7 @@ def per_recording_ratio(rows: list[dict], name: str, ref: str) -> float:
 
 def names(rows: list[dict]) -> list[str]:
     """The analyses of the run: the camera rows where ``--camera`` added them."""
-    return [*ANALYSES, KNOWN] + [n for n in CAMERA_ROWS if n in rows[0]["bounds"]]
+    return [*ANALYSES, KNOWN] + [n for n in (UNKNOWN, *CAMERA_ROWS) if n in rows[0]["bounds"]]
 
 
 def report(rows: list[dict]) -> None:
@@ -322,10 +340,17 @@ def by_kind(rows: list[dict], analyses: list[str], refs: list[str]) -> None:
 def report_by_kind(rows: list[dict]) -> None:
     """Default, known drive and exact per drive kind; width ratios to the exact row on the
     recordings where both are finite; the model's refusals."""
-    by_kind(rows, ["42 ms (default)", KNOWN, EXACT, NO_LENS], [EXACT])
+    by_kind(rows, ["42 ms (default)", KNOWN] + [UNKNOWN] * (UNKNOWN in rows[0]["bounds"])
+            + [EXACT, NO_LENS], [EXACT])
     for r in rows:
         if r["model"] != "accepted":
             print(f"    seed {r['seed']} ({r['kind']}): {r['why']}")
+    unknown = [r for r in rows if r.get("model_unknown", "accepted") != "accepted"]
+    if UNKNOWN in rows[0]["bounds"]:
+        print(f"  loop unknown: refused on {len(unknown)} of {len(rows)} (default kinematics "
+              "used there)")
+    for r in unknown:
+        print(f"    seed {r['seed']} ({r['kind']}): {r['why_unknown']}")
 
 
 def report_camera(rows: list[dict]) -> None:

@@ -114,11 +114,14 @@ def test_turning_the_other_way_is_refused_with_a_reason():
     assert not fit.accepted and "direction" in fit.why
 
 
-def test_measure_refuses_drive_model_without_a_drive(tmp_path, capsys):
+def test_measure_refuses_drive_model_without_a_reference(tmp_path, capsys):
+    """Neither a staircase nor a profile: refused naming the option and what it needs (the
+    drive itself may be left to the fit, the reference it followed may not)."""
     status = abu_main(["measure", str(tmp_path / "none.csv"), "--tracks", "--out",
                        str(tmp_path / "o"), "--kinematics", "drive-model"])
     assert status == 2
-    assert "--drive" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--kinematics" in err and "--omega0-hz" in err and "--profile" in err
     assert not (tmp_path / "o").exists()
 
 
@@ -419,3 +422,24 @@ def test_a_fit_whose_kinematics_are_not_finite_is_refused():
     model.evaluate = lambda p, need_theta=True: (0.5 * p[0] * t**2, 30.0 + p[0] * t,
                                                  np.full(t.size, p[0]))
     assert fit_model(t, th, model, 1e-4, DriveModelSettings(check_white=False)).accepted
+
+
+def test_a_fit_whose_covariance_cannot_be_computed_is_refused_not_raised(monkeypatch):
+    """A loop at the edge of stability can leave non-finite output derivatives; the SVD of
+    the information matrix then fails (seen in a free fit of a rendered record: LinAlgError
+    "SVD did not converge" reached the caller). Now a refusal with the reason."""
+    from types import SimpleNamespace
+
+    from measurement.kinematics import drive_model as dm
+
+    t = np.arange(400) / 4500.0
+    th = 30.0 * t + 0.5 * t**2 + 1e-4 * np.random.default_rng(3).standard_normal(t.size)
+    model = SimpleNamespace(names=("a",), x0=(0.3,), lo=(-10.0,), hi=(10.0,), prior=(), t=t,
+                            evaluate=lambda p, need_theta=True: (
+                                0.5 * p[0] * t**2, 30.0 + p[0] * t, np.full(t.size, p[0])))
+    settings = dm.DriveModelSettings(check_white=False)
+    assert dm.fit_model(t, th, model, 1e-4, settings).accepted
+    nan = np.full((t.size, 1), np.nan)
+    monkeypatch.setattr(dm, "_output_jacobian", lambda m, p: (nan, nan, nan))
+    fit = dm.fit_model(t, th, model, 1e-4, settings)
+    assert not fit.accepted and "covariance" in fit.why

@@ -89,6 +89,10 @@ RULES: tuple[Rule, ...] = (
      "model's fit)"),
     ("measure", lambda a: bool(a.profile), _STAIRCASE + ("--omega0-hz",),
      "with --profile (the tracking drive followed the profile, not a staircase)"),
+    ("measure", lambda a: a.kinematics != "drive-model" or bool(a.drive) or bool(a.profile),
+     ("--controller-sample-time",),
+     "except with --kinematics drive-model over a staircase without --drive (a drive.json "
+     "states its own sample_time_s; a profile's tracking loop is continuous)"),
     # identify
     ("identify", lambda a: a.pulses is None, ("--pulses-per-rev",),
      "without --pulses (it counts the pulses of --pulses)"),

@@ -4,7 +4,9 @@ The drive itself is ``--drive drive.json`` (``abu identify``). A PI drive follow
 given as in ``abu simulate`` (``--omega0-hz --omega-end-hz --t0 --te --step-hz --rounding``);
 a ``tracking`` drive followed a prescribed profile, ``--profile profile.json`` (``abu
 design``). Times are on the recording's clock (the fit adds a time offset within +- 50 ms for
-the camera's trigger).
+the camera's trigger). Without ``--drive`` the loop is unknown and fitted freely from the
+record (:mod:`measurement.kinematics.unknown_loop`); a digital controller's sample time is then
+``--controller-sample-time``.
 """
 from __future__ import annotations
 
@@ -21,8 +23,9 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kinematics", choices=["savgol", "drive-model"], default="savgol",
                    help="omega and omega_dot from the Savitzky-Golay estimator (default) or "
                         "from the --drive loop fitted to the whole record over the staircase "
-                        "below (the estimator's where the fit is refused; summary.json "
-                        "estimator.model says which and why)")
+                        "below or the --profile (without --drive: the loop fitted freely "
+                        "from the record); the estimator's where the fit is refused "
+                        "(summary.json estimator.model says which and why)")
     p.add_argument("--profile", default=None,
                    help="profile.json ('abu design' for a tracking drive): the prescribed speed "
                         "profile the --drive (model tracking) followed; with --kinematics "
@@ -38,24 +41,41 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
                    help="setpoint resolution [Hz] (default 1)")
     g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
                    help="when each step happens on the sine (default lead: the report's)")
+    g.add_argument("--controller-sample-time", type=float, default=None, metavar="S",
+                   help="without --drive: the digital speed controller's sample time [s] "
+                        "(default: a continuous controller; a digital one fitted as "
+                        "continuous is mostly refused)")
 
 
 def drive_model_from_args(args: argparse.Namespace):
-    """The analysis's ``DriveModelInput`` (None with ``--kinematics savgol``); raises
-    ParameterError naming the option."""
+    """The analysis's drive-model input (None with ``--kinematics savgol``): a
+    ``DriveModelInput`` or ``ProfileModelInput`` with ``--drive``, an ``UnknownLoopInput``
+    without; raises ParameterError naming the option."""
     if args.kinematics != "drive-model":
         return None
-    from abu_model.loop_response import as_setpoints
     from controller.drive import load_drive
-    from controller.reference import Staircase
     from measurement.kinematics.drive_model import DriveModelInput
 
     if not args.drive:
-        raise ParameterError("--drive", None, "a drive.json ('abu identify') with "
-                             "--kinematics drive-model")
+        return _unknown_loop_input(args)
     drive = load_drive(args.drive)
     if args.profile or drive.is_tracking:
         return _profile_input(args, drive)
+    setpoints = _staircase(args)
+    gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
+    if drive.sample_time is not None and gaps and min(gaps) <= drive.sample_time:
+        # the model has the controller put each step on a sample of its own
+        raise ParameterError("--drive", args.drive, f"a drive whose sample_time_s "
+                             f"({drive.sample_time:g} s) is below the staircase's shortest "
+                             f"step spacing ({min(gaps):.3g} s): steps would share a sample")
+    return DriveModelInput(drive, setpoints)
+
+
+def _staircase(args: argparse.Namespace):
+    """The staircase of the options, each bad one named."""
+    from abu_model.loop_response import as_setpoints
+    from controller.reference import Staircase
+
     for opt, value in (("--omega0-hz", args.omega0_hz), ("--omega-end-hz", args.omega_end_hz),
                        ("--te", args.te)):
         if value is None or not math.isfinite(value):
@@ -72,16 +92,34 @@ def drive_model_from_args(args: argparse.Namespace):
     if args.omega_end_hz * args.omega0_hz <= 0:
         raise ParameterError("--omega-end-hz", args.omega_end_hz,
                              "a speed of the same sign as --omega0-hz (the drive turns one way)")
-    stair = Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0, args.te,
-                      step=args.step_hz * HZ, rounding=args.rounding)
-    setpoints = as_setpoints(stair)
-    gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
-    if drive.sample_time is not None and gaps and min(gaps) <= drive.sample_time:
-        # the model has the controller put each step on a sample of its own
-        raise ParameterError("--drive", args.drive, f"a drive whose sample_time_s "
-                             f"({drive.sample_time:g} s) is below the staircase's shortest "
-                             f"step spacing ({min(gaps):.3g} s): steps would share a sample")
-    return DriveModelInput(drive, setpoints)
+    return as_setpoints(Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0,
+                                  args.te, step=args.step_hz * HZ, rounding=args.rounding))
+
+
+def _unknown_loop_input(args: argparse.Namespace):
+    """The staircase or profile with the loop left to the fit (no ``--drive``)."""
+    from controller.profile import load_profile
+    from measurement.kinematics.unknown_loop import UnknownLoopInput
+
+    sample_time = args.controller_sample_time
+    if not args.profile and args.omega0_hz is None:
+        raise ParameterError("--kinematics", "drive-model", "the reference the drive followed "
+                             "(the staircase options from --omega0-hz on, or --profile), with "
+                             "--drive drive.json ('abu identify') or without (the loop fitted "
+                             "from the record)")
+    if args.profile:
+        return UnknownLoopInput(profile=load_profile(args.profile))
+    setpoints = _staircase(args)
+    if sample_time is not None:
+        gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
+        if not (math.isfinite(sample_time) and 0 < sample_time <= 0.1):
+            raise ParameterError("--controller-sample-time", sample_time,
+                                 "a sample time in (0, 0.1] s")
+        if gaps and min(gaps) <= sample_time:
+            raise ParameterError("--controller-sample-time", sample_time,
+                                 f"a sample time below the staircase's shortest step spacing "
+                                 f"({min(gaps):.3g} s): steps would share a sample")
+    return UnknownLoopInput(setpoints=setpoints, sample_time_s=sample_time)
 
 
 def _profile_input(args: argparse.Namespace, drive):

@@ -36,15 +36,14 @@ residual's spread must not exceed the tracking noise by more than ``max_rms_rati
 fit returns the reason; the caller then keeps the Savitzky-Golay kinematics
 (:mod:`measurement.kinematics.estimators`).
 
-No 2 ms blocks, and a residual up to 1.5x the noise estimate (as the profile model,
-:mod:`measurement.kinematics.profile_model`): the tracker's error on a slowly moving CD marker
-is correlated over a few frames (lag-1 autocorrelation up to 0.54 below 1.8 px/frame), which
-2 ms blocks (9 frames) flag and which makes the noise estimate from third differences low,
-although the model is right (``benchmarks/bench_drive_refusals.py``: 9 of 69 rendered
-staircase recordings were refused so, their omega_dot at the slip within 0.43 stated sigma of
-the truth). The wrong drives show over 8 ms and longer and at the steps: a lag 30 % off, a
-torque ripple and an undeclared setpoint filter are refused as often as with 2 ms blocks
-(``tests/test_drive_model.py``, ``benchmarks/bench_drive_model.py``).
+No 2 ms blocks, and a residual up to 1.5x the noise estimate (as the profile model): the
+tracker's error on a slowly moving CD marker is correlated over a few frames (lag-1
+autocorrelation up to 0.54 below 1.8 px/frame), which 2 ms blocks (9 frames) flag and which
+makes the noise estimate from third differences low, although the model is right
+(``benchmarks/bench_drive_refusals.py``: 9 of 69 rendered staircase recordings were refused
+so, omega_dot at the slip within 0.43 stated sigma). The wrong drives show over 8 ms and
+longer and at the steps: a lag 30 % off, a torque ripple and an undeclared setpoint filter are
+refused as often as with 2 ms blocks (``tests/test_drive_model.py``).
 """
 from __future__ import annotations
 
@@ -282,6 +281,23 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
     return fit_model(t, th, _Model(t, drive, setpoints, st), sigma, st)
 
 
+def start_cost(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints,
+               settings: DriveModelSettings | None = None) -> float:
+    """The residual sum of squares [rad^2] of ``drive`` over ``setpoints`` as it stands (no
+    fit; the linear nuisance terms projected out, time offset 0): ranks starting loops of a
+    free fit (:mod:`measurement.kinematics.unknown_loop`)."""
+    st = settings or DriveModelSettings()
+    t = np.asarray(time, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    model = _Model(t, drive, setpoints, st)
+    basis = _linear_basis(t, th, st.harmonics)
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = th - model.evaluate(np.array(model.x0, float))[0]
+        r = e - basis @ np.linalg.lstsq(basis, e, rcond=None)[0]
+        cost = float(r @ r)
+    return cost if math.isfinite(cost) else math.inf
+
+
 def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
               st: DriveModelSettings) -> DriveFit:
     """Fit a drive model (``names``, ``x0``, ``lo``, ``hi``, ``prior``, ``evaluate``) to
@@ -338,7 +354,13 @@ def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     info = jac.T @ jac
     for i, _, s_i in model.prior:
         info[i, i] += 1.0 / s_i**2
-    cov = np.linalg.pinv(info) * max(1.0, rms_ratio**2)
+    try:   # a loop at the edge of stability can leave non-finite derivatives
+        if not np.all(np.isfinite(info)):
+            raise np.linalg.LinAlgError("non-finite derivatives")
+        cov = np.linalg.pinv(info) * max(1.0, rms_ratio**2)
+    except np.linalg.LinAlgError as exc:
+        return DriveFit(False, f"the fitted loop's covariance cannot be computed ({exc})",
+                        rms_ratio=rms_ratio)
     k = p.size
     c_nl = cov[:k, :k]
     # omega also carries the speed offset c (linear parameter 1)
@@ -408,7 +430,8 @@ def model_kinematics(fallback: Kinematics, theta: np.ndarray, inp: Any
     refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
     fit = inp.fit(fallback.time, theta, fallback.sigma_theta)
     info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
-            "why": fit.why, "theta_harmonics_fitted": bool(fit.accepted and getattr(
+            "why": fit.why, "loop": getattr(inp, "loop_description", "from the drive file"),
+            "theta_harmonics_fitted": bool(fit.accepted and getattr(
                 inp, "theta_harmonics_fitted", False))}
     if not fit.accepted:
         return replace(fallback, settings=info), fit

@@ -33,6 +33,9 @@ def describe_measurement(s: dict) -> str:
                     " (the running max's, no coverage guarantee)"))
     if s.get("relative_width") is not None:
         lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
+    kin = _kinematics_line(s.get("estimator") or {})
+    if kin:
+        lines.append(kin)
     ea = s["error_analysis"]
     lines.append(f"  report's worst case ({100 * ea['e_omega']:g} % on omega, "
                  f"{100 * ea['e_omega_dot']:g} % on omega_dot): {100 * ea['e_mu_min']:+.1f} % / "
@@ -50,6 +53,21 @@ def describe_measurement(s: dict) -> str:
                  f"rad, omega_dot {n['sigma_omega_dot_rad_s2']:.3g} rad/s^2 (1 sigma); "
                  f"lost frames {s['lost_frames']['any']}")
     return "\n".join(lines)
+
+
+def _kinematics_line(est: dict) -> str:
+    """Where omega and omega_dot came from, and how to narrow the interval when they came from
+    local smoothing (the default): the whole-record drive model, 1.8x narrower on the harsh
+    family whether the loop is identified or not (benchmarks/bench_width_floor.py)."""
+    if est.get("name") == "savgol" and est.get("model") is None:
+        return ("  kinematics: local Savitzky-Golay fit; to narrow the interval state the "
+                "staircase or profile the drive followed (--kinematics drive-model, with "
+                "--drive or without)")
+    if est.get("model") == "accepted":
+        return f"  kinematics: the drive model over the whole record (loop {est.get('loop')})"
+    if est.get("model") == "refused":
+        return f"  kinematics: drive model refused ({est.get('why')}); Savitzky-Golay used"
+    return ""
 
 
 def describe_combined(r: dict) -> str:
