@@ -47,8 +47,8 @@ from measurement.imaging import tracks_io  # noqa: E402
 from measurement.imaging.geometry import fixed_axis  # noqa: E402
 from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, _estimator, analyse_tracks  # noqa
-from measurement.kinematics.drive_model import (DriveModelInput,  # noqa: E402
-                                                DriveModelSettings, fit_drive_model)
+from measurement.kinematics.drive_model import DriveModelInput, fit_drive_model  # noqa: E402
+from measurement.kinematics.model_fit import DriveModelSettings  # noqa: E402
 from test_inference import scenario_tracks  # noqa: E402
 from twin.scenario import random_scenario  # noqa: E402
 

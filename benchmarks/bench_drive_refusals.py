@@ -44,7 +44,7 @@ from bench_width_floor import family_seeds, tracked  # noqa: E402
 from measurement.imaging import tracks_io  # noqa: E402
 from measurement.imaging.geometry import fixed_axis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, _estimator, _fill_lost  # noqa: E402
-from measurement.kinematics import drive_model as dm  # noqa: E402
+from measurement.kinematics import model_fit as dm  # noqa: E402
 
 
 def one(seed: int, lighting: str | None) -> dict | None:
@@ -60,7 +60,7 @@ def one(seed: int, lighting: str | None) -> dict | None:
     fit = known.drive_model.fit(t, theta, sigma)
     dt = float(t[1] - t[0])
     err = theta - state["theta"]
-    basis = dm._linear_basis(t, theta, 3)
+    basis = dm.linear_basis(t, theta, 3)
     err = err - basis @ np.linalg.lstsq(basis, err, rcond=None)[0]
     loose = replace(known.drive_model, settings=dm.DriveModelSettings(
         check_white=False, max_rms_ratio=np.inf)).fit(t, theta, sigma)
@@ -70,8 +70,8 @@ def one(seed: int, lighting: str | None) -> dict | None:
             "fit_p": min((v for k, v in fit.block_p.items() if not k.startswith("step")),
                          default=np.nan),
             "err_rms": float(np.std(err) / sigma),
-            "err_p": min(dm._whiteness(err / sigma, dt).values()),
-            "err_p2": dm._whiteness(err / sigma, dt, (0.002,))["0.002"],
+            "err_p": min(dm.whiteness(err / sigma, dt).values()),
+            "err_p2": dm.whiteness(err / sigma, dt, (0.002,))["0.002"],
             "ac1": float(np.corrcoef(err[:-1], err[1:])[0, 1]),
             "ac2": float(np.corrcoef(err[:-2], err[2:])[0, 1]),
             "speed": float(np.median(np.abs(state["omega"])) * scn.r_cd / scn.pixel_size * dt),

@@ -3,7 +3,6 @@ record, its error bars, and its refusal when the drive is not the model."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -15,8 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from abu.cli.main import main as abu_main  # noqa: E402
 from abu_model.loop_response import Setpoints, modes, response  # noqa: E402
 from controller.drive import Drive  # noqa: E402
-from measurement.kinematics.drive_model import (DriveModelSettings,  # noqa: E402
-                                                fit_drive_model)
+from measurement.kinematics.drive_model import fit_drive_model  # noqa: E402
 from measurement.kinematics.estimators import savgol_kinematics  # noqa: E402
 
 FPS = 4500.0
@@ -231,7 +229,8 @@ def test_steps_on_one_controller_sample_merge_and_keep_the_step_locked_test():
     gives one step to the later level (same response), so the step-locked whiteness test keeps
     its window (a zero gap between steps used to cut it to nothing, silently)."""
     from abu_model.loop_response import sampled
-    from measurement.kinematics.drive_model import DriveModelSettings, _Model
+    from measurement.kinematics.drive_model import _Model
+    from measurement.kinematics.model_fit import DriveModelSettings
     sp = Setpoints((0.0101, 0.0105, 0.03, 0.05, 0.07), (0.0, 1.0, 2.0, 3.0, 4.0, 5.0))
     merged = sampled(sp, 1e-3)
     assert np.allclose(merged.step_times, (0.011, 0.03, 0.05, 0.07))
@@ -401,7 +400,7 @@ def test_a_fit_whose_kinematics_are_not_finite_is_refused():
     import warnings
     from types import SimpleNamespace
 
-    from measurement.kinematics.drive_model import DriveModelSettings, fit_model
+    from measurement.kinematics.model_fit import DriveModelSettings, fit_model
 
     t = np.arange(400) / 4500.0
     rng = np.random.default_rng(3)
@@ -430,7 +429,7 @@ def test_a_fit_whose_covariance_cannot_be_computed_is_refused_not_raised(monkeyp
     "SVD did not converge" reached the caller). Now a refusal with the reason."""
     from types import SimpleNamespace
 
-    from measurement.kinematics import drive_model as dm
+    from measurement.kinematics import model_fit as dm
 
     t = np.arange(400) / 4500.0
     th = 30.0 * t + 0.5 * t**2 + 1e-4 * np.random.default_rng(3).standard_normal(t.size)
@@ -440,6 +439,6 @@ def test_a_fit_whose_covariance_cannot_be_computed_is_refused_not_raised(monkeyp
     settings = dm.DriveModelSettings(check_white=False)
     assert dm.fit_model(t, th, model, 1e-4, settings).accepted
     nan = np.full((t.size, 1), np.nan)
-    monkeypatch.setattr(dm, "_output_jacobian", lambda m, p: (nan, nan, nan))
+    monkeypatch.setattr(dm, "output_jacobian", lambda m, p: (nan, nan, nan))
     fit = dm.fit_model(t, th, model, 1e-4, settings)
     assert not fit.accepted and "covariance" in fit.why

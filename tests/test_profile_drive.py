@@ -16,7 +16,6 @@ from abu_model.tracking_response import reference, response
 from abu_model.params import BallParams
 from controller.drive import Drive, DriveFileError, drive_from_dict
 from controller.profile import Profile, ProfileFileError, profile_from_dict
-from measurement.kinematics.drive_model import DriveModelSettings
 from measurement.kinematics.profile_model import fit_profile_model
 
 TWO_PI = 2 * math.pi

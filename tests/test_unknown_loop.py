@@ -182,6 +182,23 @@ def test_measure_without_a_drive_fits_the_loop_and_says_so(tmp_path, capsys):
         in capsys.readouterr().out
 
 
+def test_measure_with_a_profile_and_no_drive_fits_the_tracking_loop(tmp_path, capsys):
+    """``abu measure --kinematics drive-model --profile profile.json`` without ``--drive``: the
+    tracking loop fitted freely, accepted on a twin tracking drive, named continuous."""
+    from controller.profile import dumps_profile
+    t, th, alpha, profile = _tracking_record(3)
+    _tracks_csv(tmp_path / "tracks.csv", t, th)
+    (tmp_path / "profile.json").write_text(dumps_profile(profile))
+    out = tmp_path / "o"
+    assert abu_main(["measure", str(tmp_path / "tracks.csv"), "--tracks", "--out", str(out),
+                     "--quiet", "--no-plots", "--kinematics", "drive-model", "--profile",
+                     str(tmp_path / "profile.json")]) == 0, capsys.readouterr().err
+    est = json.loads((out / "summary.json").read_text())["estimator"]
+    assert est["model"] == "accepted", est["why"]
+    assert est["loop"] == "unknown, fitted freely (continuous)"
+    assert est["theta_harmonics_fitted"] is True
+
+
 def test_the_printed_summary_says_where_the_kinematics_came_from():
     """The default's line points to the drive model; a refused fit's line gives the reason."""
     from measurement.report.summary_text import _kinematics_line

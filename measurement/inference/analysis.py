@@ -41,9 +41,9 @@ class AnalysisError(AbuError, ValueError):
 def _kinematics(time: np.ndarray, theta: np.ndarray, opt: AnalysisOptions) -> kin_mod.Kinematics:
     kin = _estimator(time, theta, opt)
     if opt.kinematics == "drive-model":
-        # imported only for this option (it loads the loop response and the drive file code)
-        from measurement.kinematics import drive_model
-        kin = drive_model.apply(kin, theta, opt.drive_model)
+        # imported only for this option (the inputs load the loop response and drive code)
+        from measurement.kinematics import model_fit
+        kin = model_fit.apply(kin, theta, opt.drive_model)
     # the ball model needs the ABU spinning (a stop or reversal leaves the trusted run)
     trusted = spinning_run(kin.omega, kin.trusted)
     return kin if trusted is kin.trusted else replace(kin, trusted=trusted)

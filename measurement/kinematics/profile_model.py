@@ -27,7 +27,7 @@ from abu_model.tracking_response import response
 from controller.drive import UPPER, Drive
 from controller.profile import Profile
 
-from measurement.kinematics.drive_model import DriveFit, DriveModelSettings, fit_model
+from measurement.kinematics.model_fit import DriveFit, DriveModelSettings, fit_model
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 
 #: the gain's fitted range [-]
