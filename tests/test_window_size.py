@@ -158,3 +158,12 @@ def test_a_fast_marker_near_the_ball_gets_the_one_step_room():
     # a static marker too large for its gap is still refused (one step of nothing is nothing)
     with pytest.raises(WindowError):
         window_from_extents(seeds, [MarkerExtent(20.0, 0.0, 100.0), *extents[1:]], 256)
+
+
+def test_markers_too_faint_to_measure_and_too_close_are_refused_not_crashed():
+    """No marker measurable (all too faint) and seeds closer than the least window allows:
+    a WindowError with the numbers (it was a TypeError formatting the missing radius)."""
+    from measurement.imaging.window_size import MarkerExtent, window_from_extents
+    faint = [MarkerExtent(None, 0.0, 0.0)] * 3
+    with pytest.raises(WindowError, match="no marker could be measured"):
+        window_from_extents(np.array([[100.0, 100.0], [104.0, 100.0], [102.0, 100.0]]), faint)

@@ -245,12 +245,15 @@ def window_from_extents(seeds: np.ndarray, extents: list[MarkerExtent],
         worst = int(np.argmax([hold_px(e) if e.outer_px is not None else 0.0
                                for e in extents]))
         e = extents[worst]
+        need = (f"the {ROLES[worst]} marker (outer radius {e.outer_px:.1f} px, moving "
+                f"{e.step_px:.1f} px a frame) needs >= {needs:.1f} px" if e.outer_px is not None
+                else f"no marker could be measured, and the tracker's least window is "
+                     f"{MIN_WINDOW_PX} px")
         raise WindowError(
-            f"no tracking window fits these markers: the {ROLES[worst]} marker (outer radius "
-            f"{e.outer_px:.1f} px, moving {e.step_px:.1f} px a frame) needs >= {needs:.1f} px, "
-            f"but the ball passes {gaps[0]:.1f} px from the centre marker and {gaps[1]:.1f} px "
-            f"from the CD marker, which allows <= {allows:.1f} px. Give --window (and check "
-            f"--seeds), or record with the markers farther apart")
+            f"no tracking window fits these markers: {need}, but the ball passes "
+            f"{gaps[0]:.1f} px from the centre marker and {gaps[1]:.1f} px from the CD marker, "
+            f"which allows <= {allows:.1f} px. Give --window (and check --seeds), or record "
+            f"with the markers farther apart")
     window = min(max(FAMILY_WINDOW_PX, low), high)
     return WindowChoice(int(window), float(needs), float(allows), tuple(extents), gaps)
 
