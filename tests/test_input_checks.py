@@ -114,3 +114,17 @@ def test_a_dropped_or_repeated_frame_is_refused_a_glitch_or_a_stated_gap_is_not(
                 check_motion_and_roles(rec.time, xg, yg, "record")
     print(f"time base: {caught} of {n} dropped or repeated frames refused")
     assert caught == n
+
+
+def test_time_base_check_is_quiet_over_a_still_stretch():
+    """A CD marker held still for 50 frames, then a single step, then turning: the running
+    median is 0 there, the ratios infinite; no NumPy warning escapes (a run with warnings as
+    errors stopped inside the check) and nothing is called a dropped frame."""
+    import warnings
+
+    from measurement.kinematics.input_checks import _check_time_base
+    t = np.arange(200) / 4500.0
+    theta = np.r_[np.zeros(50), 0.01, np.full(49, 0.01), 0.01 + np.cumsum(np.full(100, 0.01))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _check_time_base(t, theta, "still.csv")

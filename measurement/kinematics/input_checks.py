@@ -126,12 +126,12 @@ def _check_time_base(time: np.ndarray, theta: np.ndarray, source: str) -> None:
     typical = np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * h + 1), axis=1)
     dev = speed - typical
     sigma = 1.4826 * float(np.median(np.abs(dev - np.median(dev))))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):   # a still stretch: typical 0
         ratio = speed / typical
-    whole = np.rint(ratio)
-    odd = (np.abs(ratio - whole) < STEP_RATIO_SLACK) & (whole != 1) & (whole >= 0) \
-        & (np.abs(dev) > STEP_NOISE_SIGMAS * sigma)
-    normal = np.abs(ratio - 1.0) < STEP_RATIO_SLACK
+        whole = np.rint(ratio)
+        odd = (np.abs(ratio - whole) < STEP_RATIO_SLACK) & (whole != 1) & (whole >= 0) \
+            & (np.abs(dev) > STEP_NOISE_SIGMAS * sigma)
+        normal = np.abs(ratio - 1.0) < STEP_RATIO_SLACK
     odd[1:-1] &= normal[:-2] & normal[2:]             # neighbours normal: not a tracking glitch
     odd[[0, -1]] = False
     bad = np.flatnonzero(odd)
