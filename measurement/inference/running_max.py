@@ -53,6 +53,7 @@ from abu_model.errors import ParameterError
 
 from measurement.kinematics.harmonic import robust_std
 from measurement.kinematics.estimators import moving_average, noise_sigma
+from measurement.inference.slip_model import slip_direction
 
 LOWER_METHODS = ("creep", "band")
 
@@ -336,7 +337,6 @@ def slip_interval(time: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
     m_lo = running_max(mu_lo, trusted)
     m_hi = running_max(mu_hi, trusted)
     if direction is None:
-        from measurement.inference.slip_model import slip_direction
         direction = slip_direction(omega, omega_dot, trusted)
     direction = int(direction)
 

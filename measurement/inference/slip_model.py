@@ -48,8 +48,9 @@ SPINNING_SHARE = 0.2
 
 
 def spinning_run(omega: np.ndarray, trusted: np.ndarray) -> np.ndarray:
-    """``trusted`` [bool] (the same array where nothing changes) ended where the ABU slows below :data:`SPINNING_SHARE` of its top
-    speed so far (omega [rad/s]; a stop or a reversal of the rotation). The ball presses on
+    """``trusted`` [bool] ended where the ABU slows below :data:`SPINNING_SHARE` of its top
+    speed so far (omega [rad/s]; a stop or a reversal of the rotation); the same array where
+    nothing changes. The ball presses on
     its track with m omega^2 l: near omega = 0 mu_req (omega_dot / omega^2) grows without bound
     and the model says nothing (a run-up and run-down through 0 gave a "lower bound" of 705).
     The harsh family's drives never slow below 0.86 of their top speed (seeds 0-299 and
