@@ -229,3 +229,22 @@ def test_bad_controller_sample_time_is_refused_by_name(tmp_path, capsys, extra, 
     assert status == 2
     assert option in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({}, "setpoints, profile"),
+    ({"setpoints": "SP", "profile": "PROFILE"}, "setpoints, profile"),
+    ({"setpoints": "SP", "sample_time_s": 0.0}, "sample_time_s"),
+    ({"setpoints": "SP", "sample_time_s": math.nan}, "sample_time_s"),
+    ({"setpoints": "SP", "sample_time_s": -1e-3}, "sample_time_s"),
+])
+def test_the_python_input_refuses_what_makes_no_sense_by_name(kwargs, field):
+    """From Python (no command line in between): neither or both references, a sample time of
+    0, NaN or below 0 are a ParameterError naming the field."""
+    from abu_model.errors import ParameterError
+    t, th, alpha, spec, sp = next(_records(1))
+    profile = _tracking_record(0)[3]
+    kwargs = {k: sp if v == "SP" else profile if v == "PROFILE" else v
+              for k, v in kwargs.items()}
+    with pytest.raises(ParameterError, match=field):
+        UnknownLoopInput(**kwargs)
