@@ -50,7 +50,8 @@ lines), ``--report`` prints their tables again.
 frame interval, the twin's controller rate). Measured (tenth session, seeds 0..99 + 10
 two-spot): 18.8 % = 0.98x exact (known drive 0.98x, default 1.79x), 100 %, no miss, refused on
 2 of 110; unseen ``--first 7000 --n 90 --two-spot 10``: 22.0 % = 0.93x (default 1.73x), 100 %,
-no miss, refused on 1 of 100.
+no miss, refused on 1 of 100; ``--first 9000 --n 50 --two-spot 0``: 17.9 % = 1.03x (default
+1.94x), 100 %, no miss, refused on 0 of 50.
 
 Measured (seeds 0..99 + 10 two-spot): median width default 34.6 %, exact kinematics 18.7 %,
 ``known drive`` 19.4 % (1.01x exact; staircase 1.08x, profile 0.94x: the profile model fits
