@@ -43,6 +43,14 @@ median width, and measured / predicted width against the same (default-kinematic
 
     nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --kinematics drive-model
 
+``--camera VIEWS`` calibrates each run's lens on that many chessboard views through its own
+optics (``lens_calibration.calibrate``, ``abu calibrate-camera``) and measures with ``abu
+measure --camera`` (both measurements); the predictions take the calibration's lens prior (a
+user's ``--noise-from`` summary measured with the camera states it), and the report prints the
+priors' spread::
+
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --jobs 2 --camera 30
+
 What-ifs of that second measurement (not options of ``abu measure``): ``--free-setpoint-weight``
 declares a ``pi-lag`` drive as ``pi-lag-weighted`` (the setpoint weight fitted from 1: the
 twin's forward-Euler frame-rate integrator leaves a non-white residual when b is held at 1),
@@ -92,6 +100,8 @@ SECOND_KINEMATICS: list[str] = []
 #: What-ifs of that second measurement: a ``pi-lag`` drive declared ``pi-lag-weighted`` (its
 #: setpoint weight fitted from 1: ``--free-setpoint-weight``).
 DRIVE_MODEL_WHAT_IF: dict[str, bool] = {"free_setpoint_weight": False, "exact": False}
+#: ``--camera N``: calibrate each run's lens on N chessboard views and measure with ``--camera``
+CAMERA_VIEWS: list[int] = []
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -147,6 +157,11 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
     if scn.lighting.reflections == 2:
         args += ["--ball-reflections", "2"]
+    if CAMERA_VIEWS:   # the lens calibrated as a user would, before recording
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from lens_calibration import calibrate
+        cam, _ = calibrate(scn, out, CAMERA_VIEWS[0])
+        args += ["--camera", str(cam)]
     args += EXTRA_MEASURE_ARGS
     with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
         status = abu_main(args)
@@ -236,6 +251,8 @@ def one(job: tuple) -> dict:
                                        "kinematic_rel_bias_at_slip", "lower_bound_sup_z",
                                        "sigma_leftover_rad", "leftover_tau_s")})
     row["sigma_white_beta_rad"] = (mf.get("noise_model") or {}).get("sigma_white_rad")
+    row["lens_prior_rad"] = ((s.get("camera") or {}).get("theta_harmonic_prior") or {}).get(
+        "theta_harmonic_rad")
     if "exact" in s:
         row["exact"] = {k: s["exact"].get(k) for k in ("mu_low", "mu_high", "relative_width")}
     if "second" in s:
@@ -253,24 +270,38 @@ def one(job: tuple) -> dict:
     return row
 
 
-def predicted(row: dict, design: dict, camera: bool = False, true_mu_d: bool = False) -> dict:
+def predicted(row: dict, design: dict, camera: bool = False, true_mu_d: bool = False,
+              kinematics: str = "savgol") -> dict:
     """The width model's prediction for this run's design at its true mu; ``camera``: with
     the camera's noise known (this run's measured theta and beta noise, what an earlier
-    recording of the same set-up states: ``abu next`` reads it from the summaries);
-    ``true_mu_d``: told the run's true mu_d / mu (its range collapsed onto it; a plan spans
-    0.6-1 around 0.8)."""
+    recording of the same set-up states: ``abu next`` reads it from the summaries); the lens
+    prior is the calibration's wherever the run was measured with ``--camera`` (known before
+    the run: the calibration comes first); ``true_mu_d``: told the run's true mu_d / mu (its
+    range collapsed onto it; a plan spans 0.6-1 around 0.8); ``kinematics``: those of the
+    measurement predicted (``drive-model``: the second measurement)."""
     from harness.planning.design_width import predict_run_width
-    from harness.planning.width_model import CALIBRATED, MU_D_RATIOS, with_camera_noise
-    c = CALIBRATED
+    from harness.planning.width_model import CALIBRATED, MU_D_RATIOS, with_recorded_setup
+    c = replace(CALIBRATED, kinematics=kinematics)
+    if row.get("lens_prior_rad") is not None:
+        c = replace(c, theta_harmonic_rad=row["lens_prior_rad"])
     k = row["mu_d"] / row["mu"]
     ratios = (k, k, k) if true_mu_d else MU_D_RATIOS
     if camera:
-        c = with_camera_noise(c, [{"noise": {"sigma_theta_rad": row["sigma_theta_rad"]},
-                                   "model_fit": {"noise_model": {
-                                       "sigma_white_rad": row["sigma_white_beta_rad"],
-                                       "sigma_leftover_rad": row["sigma_leftover_rad"]}}}])
+        c = with_recorded_setup(c, [{"noise": {"sigma_theta_rad": row["sigma_theta_rad"]},
+                                     "model_fit": {"noise_model": {
+                                         "sigma_white_rad": row["sigma_white_beta_rad"],
+                                         "sigma_leftover_rad": row["sigma_leftover_rad"]}}}])
     return predict_run_width(design, DRIVES[row["drive"]], row["mu"], constants=c,
                              mu_d_ratios=ratios)
+
+
+def add_predictions(row: dict, design: dict) -> None:
+    """The row's predictions: default kinematics, and drive-model ones (the second
+    measurement), each without and with the camera's noise known."""
+    row["pred"] = predicted(row, design)
+    row["pred_camera"] = predicted(row, design, camera=True)
+    row["pred_dm"] = predicted(row, design, kinematics="drive-model")
+    row["pred_dm_camera"] = predicted(row, design, camera=True, kinematics="drive-model")
 
 
 def _ratio_with_true_mu_d(rows: list[dict], camera: bool = False) -> np.ndarray:
@@ -332,6 +363,11 @@ def report(rows: list[dict], label: str) -> None:
         print(f"  what sets it (medians of abu measure's parts, relative to mu): beta profile "
               f"{med[0]:.1f} %, lens prior 2 A (lever/mu + 2) {med[1]:.1f} %, truncation bound "
               f"x 2 {med[2]:.1f} %, kinematic noise (z_lo + z) sigma {med[3]:.1f} %")
+        lens = [r["lens_prior_rad"] for r in fin if r.get("lens_prior_rad") is not None]
+        if lens:
+            print(f"  calibrated lens prior (--camera) of {len(lens)} runs: median "
+                  f"{np.median(lens):.2g} rad, range {min(lens):.2g}-{max(lens):.2g} "
+                  "(uncalibrated: 8e-4)")
         prof = np.array([((r["profile_mu_high"] - r["profile_mu_low"]) / r["mu"])
                          / r["pred"]["profile"] for r in fin if r["pred"]["profile"]])
         if prof.size:
@@ -343,12 +379,12 @@ def report(rows: list[dict], label: str) -> None:
 def report_second(rows: list[dict], label: str) -> None:
     """The same runs measured with the drive-model kinematics (``--kinematics drive-model``),
     beside the default: refusals and why, finite bounds, coverage, widths; the ratio is
-    against the default's predictor (the width model knows no drive-model kinematics)."""
+    against the width model for drive-model kinematics (``kinematics="drive-model"``)."""
     ok = [r for r in rows if r.get("exit") == 0 and "drive_model" in r]
     if not ok:
         return
-    dm = [{**r["drive_model"], "mu": r["mu"], "pred": r["pred"], "w0": r["relative_width"]}
-          for r in ok]
+    dm = [{**r["drive_model"], "mu": r["mu"], "pred": r["pred_dm"], "w0": r["relative_width"],
+           "pred_cam": r["pred_dm_camera"]} for r in ok]
     failed = [d for d in dm if d["exit"] != 0]
     refused = [d for d in dm if d["exit"] == 0 and d["model"] != "accepted"]
     meas = [d for d in dm if d["exit"] == 0]
@@ -371,9 +407,16 @@ def report_second(rows: list[dict], label: str) -> None:
           f"{100 * np.median([d['w0'] for d in fin if d['w0']]):.1f} %), drive-model / default "
           f"on the same run: median {np.median(pair):.3f}, 5-95 % "
           f"[{np.percentile(pair, 5):.3f}, {np.percentile(pair, 95):.3f}]")
-    print(f"    measured / predicted (default's predictor): median {np.median(ratio):.3f}, 5-95 % "
-          f"[{np.percentile(ratio, 5):.3f}, {np.percentile(ratio, 95):.3f}], within "
-          f"[{RATIO_BAND[0]}, {RATIO_BAND[1]}]: {100 * band.mean():.1f} %")
+    inside = np.mean([d["pred"]["low90"] <= d["relative_width"] <= d["pred"]["high90"]
+                      for d in fin])
+    ratio_cam = np.array([d["relative_width"] / d["pred_cam"]["expected"] for d in fin])
+    band_cam = (ratio_cam >= RATIO_BAND[0]) & (ratio_cam <= RATIO_BAND[1])
+    print(f"    measured / predicted (the width model for drive-model kinematics): median "
+          f"{np.median(ratio):.3f}, 5-95 % [{np.percentile(ratio, 5):.3f}, "
+          f"{np.percentile(ratio, 95):.3f}], within [{RATIO_BAND[0]}, {RATIO_BAND[1]}]: "
+          f"{100 * band.mean():.1f} %, inside the predicted 90 % range {100 * inside:.1f} %; "
+          f"with the camera's noise known: median {np.median(ratio_cam):.3f}, within the band "
+          f"{100 * band_cam.mean():.1f} %")
     ex = [(d["relative_width"], d["w0"], r["exact"]["relative_width"])
           for d, r in zip(dm, ok) if finite(d) and d["w0"] and (r.get("exact") or {}).get(
               "relative_width")]
@@ -478,12 +521,18 @@ def main() -> None:
     ap.add_argument("--max-evaluations", type=int, default=None,
                     help="with --kinematics drive-model: the fit's most model evaluations "
                          "(what-if; DriveModelSettings.max_evaluations, 200)")
+    ap.add_argument("--camera", type=int, default=0, metavar="VIEWS",
+                    help="calibrate each run's lens on this many chessboard views "
+                         "(lens_calibration.calibrate) and measure with 'abu measure --camera' "
+                         "(both measurements); the predictions take the calibration's lens prior")
     ap.add_argument("--exact", action="store_true",
                     help="with --kinematics drive-model: measure a third time with the "
                          "plant's exact kinematics (the floor) and print the ratios to it")
     a = ap.parse_args()
     DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] = a.free_setpoint_weight
     DRIVE_MODEL_WHAT_IF["exact"] = a.exact
+    if a.camera:
+        CAMERA_VIEWS.append(a.camera)
     if a.error_rel is not None or a.max_evaluations is not None:
         what_if_settings(a.error_rel, a.max_evaluations)
     if a.timing_samples is not None:   # in-process abu measure: the module's constant
@@ -500,8 +549,7 @@ def main() -> None:
         rows = [json.loads(x) for x in Path(a.report).read_text().splitlines() if x]
         for r in rows:
             if r.get("exit") == 0:
-                r["pred"] = predicted(r, r["design"])
-                r["pred_camera"] = predicted(r, r["design"], camera=True)
+                add_predictions(r, r["design"])
         print(f"rows of {a.report}: seeds {min(r['seed'] for r in rows)}.."
               f"{max(r['seed'] for r in rows)}")
         report_slices(rows)
@@ -529,8 +577,7 @@ def main() -> None:
         Path(a.rows).write_text("".join(json.dumps(r) + "\n" for r in rows))
     for r, j in zip(rows, jobs):
         if r.get("exit") == 0:
-            r["pred"] = predicted(r, j[3])
-            r["pred_camera"] = predicted(r, j[3], camera=True)
+            add_predictions(r, j[3])
     print(f"seeds {a.first}..{a.first + a.runs - 1}, {len(cfg)} designs (ranges "
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in RANGES)} x drives "
           f"{', '.join(DRIVES)}), true mu log-uniform in each range, mu_d/mu in {MU_D_RATIO}, "

@@ -23,8 +23,10 @@ HZ = 2.0 * math.pi
 #: measured 30 + 30 designed runs with it; the staircase design's default, 50 Hz, is untested
 #: for the tracker at the profile's sustained speeds)
 SPEED_MAX_HZ = 40.0
-#: staircase-only options of ``abu design``, refused with a tracking drive
-STAIRCASE_ONLY = ("--step-hz", "--slip-window-s", "--objective", "--fmu-dir")
+#: staircase-only options of ``abu design``, refused with a tracking drive (the profile's
+#: width predictor assumes the drive-model kinematics and its own calibrated noise)
+STAIRCASE_ONLY = ("--step-hz", "--slip-window-s", "--objective", "--fmu-dir", "--noise-from",
+                  "--kinematics")
 
 
 def profile_spec(args: argparse.Namespace, drive):
@@ -92,7 +94,8 @@ def cmd_design_profile(args: argparse.Namespace, drive) -> int:
     def _dumps(obj) -> str:
         return json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n"
 
-    refuse_given(args, STAIRCASE_ONLY, "with a tracking --drive (they set up a staircase)")
+    refuse_given(args, STAIRCASE_ONLY, "with a tracking --drive (they set up a staircase or "
+                 "its width prediction; the profile's assumes the drive-model kinematics)")
     design = design_profile(profile_spec(args, drive))
     payload = design.summary()
     if args.out:

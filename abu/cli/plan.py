@@ -17,6 +17,7 @@ from typing import Any
 
 from abu_model.errors import ParameterError
 
+from abu.cli.plan_width import add_width_options, width_constants
 from abu.cli.common import (add_figure_format, add_overwrite, camera_fps, finite, in_range, integer_range,
                             positive)
 
@@ -156,7 +157,7 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
              "report's setup has 1 Hz")
     try:
         return DesignSpec(
-            width=_width_constants(args.noise_from or [], getattr(args, "summaries", None)),
+            width=width_constants(args, getattr(args, "summaries", None)),
             mu_lo=lo, mu_hi=hi,
             ball=BallParams(l=positive("--l", args.l, "m"), d=positive("--d", args.d, "m")),
             fps=args.fps, frames=args.frames,
@@ -170,30 +171,6 @@ def _spec(args: argparse.Namespace, lo: float, hi: float, drive=None):
         option = {"speed_max_hz": "--speed-max-hz", "edge_s": "--edge-s", "mu_lo": "--mu-range",
                   "mu_hi": "--mu-range"}.get(exc.parameter)
         raise exc if option is None else ParameterError(option, exc.value, exc.expected) from None
-
-
-def _width_constants(noise_from: list[str], summaries: list[str] | None):
-    """The width model's constants with the camera's noise of ``--noise-from`` (else, for
-    ``abu next``, of the summaries it combines; else the calibrated defaults)."""
-    from harness.planning.width_model import CALIBRATED, with_camera_noise
-
-    paths = noise_from or [p for p in summaries or [] if Path(p).suffix.lower() == ".json"]
-    found = []
-    for p in paths:
-        try:
-            obj = json.loads(Path(p).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ParameterError("--noise-from" if noise_from else "summaries", p,
-                                 f"a readable abu measure summary.json ({exc})") from None
-        if not isinstance(obj, dict):
-            raise ParameterError("--noise-from" if noise_from else "summaries", p,
-                                 "a JSON object (abu measure summary.json)")
-        if obj.get("kind") == "abu-measure-summary":
-            found.append(obj)
-        elif noise_from:
-            raise ParameterError("--noise-from", p, "an abu measure summary.json (kind "
-                                 f"abu-measure-summary, not {obj.get('kind')!r})")
-    return with_camera_noise(CALIBRATED, found)
 
 
 def _g(value: float | None, digits: int = 5) -> str:
@@ -350,10 +327,7 @@ def _add_design_options(p: argparse.ArgumentParser) -> None:
                    help="minimise the mean width 'abu measure' is predicted to report over a "
                         "log-uniform prior on the range (default), or the noise-free mean or "
                         "largest width")
-    g.add_argument("--noise-from", nargs="+", default=None, metavar="SUMMARY",
-                   help="abu measure summary.json of earlier recordings with this camera and "
-                        "lighting: their theta and beta noise set the predicted width (default: "
-                        "the calibrated typical camera; abu next uses the summaries it combines)")
+    add_width_options(g)
     g.add_argument("--l", type=float, default=1.15e-2, help="radius of the ball centre's path [m]")
     g.add_argument("--d", type=float, default=3.0e-3, help="ball diameter [m]")
     g = p.add_argument_group("output")

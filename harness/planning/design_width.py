@@ -31,7 +31,8 @@ def predict_staircase(spec: Any, staircase: Staircase, mus: np.ndarray) -> Width
     """The width model at ``mus`` for ``staircase`` under ``spec`` (a DesignSpec, whose
     ``width`` holds the model's constants)."""
     t, th, w, a = staircase_motion(spec.drive, staircase, spec.fps, spec.frames)
-    return predict_widths(t, th, w, a, mus, spec.ball.lever_ratio, spec.width)
+    return predict_widths(t, th, w, a, mus, spec.ball.lever_ratio, spec.width,
+                          controller_sample_time_s=spec.drive.sample_time)
 
 
 def score(pred: WidthPrediction, objective: str) -> float:
@@ -45,12 +46,14 @@ def summary(pred: WidthPrediction, objective: str) -> dict[str, Any]:
     fin = np.isfinite(pred.expected)
     return {
         "method": "harness.planning.width_model: slip emergence from beta's noise, "
-                  "Savitzky-Golay kinematic noise and truncation, lens prior; calibrated on "
-                  "rendered designed runs (docs/design.md)",
+                  "kinematic noise and truncation (Savitzky-Golay, or the drive model's "
+                  "floor), lens prior; calibrated on rendered designed runs (docs/design.md)",
         "definition": "abu measure's relative_width, (mu_high - mu_low) / mid",
         "objective": objective,
         "camera_noise": {"sigma_theta_rad": pred.constants.sigma_theta_rad,
-                         "sigma_beta_rad": pred.constants.sigma_beta_rad},
+                         "sigma_beta_rad": pred.constants.sigma_beta_rad,
+                         "theta_harmonic_rad": pred.constants.theta_harmonic_rad},
+        "kinematics": pred.constants.kinematics,
         "expected": float(np.mean(pred.expected)) if fin.all() else None,
         "low90": float(np.mean(pred.low90)) if fin.all() else None,
         "high90": float(np.mean(pred.high90)) if fin.all() else None,
@@ -73,4 +76,4 @@ def predict_run_width(design: dict[str, Any], drive: Drive, mu: float, lever: fl
     t, th, w, a = staircase_motion(drive, stair, design["fps_hz"], design["frames"])
     lev = BallParams().lever_ratio if lever is None else lever
     return predict_widths(t, th, w, a, np.array([mu]), lev, constants,
-                          mu_d_ratios).row(0)
+                          mu_d_ratios, drive.sample_time).row(0)

@@ -29,14 +29,17 @@ Free constants (:class:`WidthConstants`), calibrated on rendered designed runs
 docs/design.md): the emergence threshold ``k_emerge``, beta's and theta's noise, the lower
 bound's quantile and the factors of the 90 % range around the widths at mu_d / mu in [0.6, 1]
 (the measurement does not know mu_d). Constants of ``abu measure`` duplicated here (harness does not import measurement):
-the SG window 42 ms and degree 9, the lens prior 8e-4 rad, the confidence 95 %.
+the SG window 42 ms and degree 9, the lens prior 8e-4 rad, the confidence 95 %, the drive
+model's discrepancy floor 1 %.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from abu_model.errors import ParameterError
 
 #: ``abu measure``'s defaults (measurement.inference.options.AnalysisOptions,
 #: measurement.inference.types.InferenceOptions), duplicated: harness does not import measurement.
@@ -44,6 +47,10 @@ SG_WINDOW_S = 0.042
 SG_POLYORDER = 9
 THETA_HARMONIC_RAD = 8e-4
 Z95 = 1.959964
+#: measurement.kinematics.model_fit.DriveModelSettings.error_rel, duplicated likewise
+DRIVE_MODEL_ERROR_REL = 0.01
+#: the kinematics ``abu measure`` can use (``--kinematics``)
+KINEMATICS = ("savgol", "drive-model")
 #: mu_d / mu spanned by the range (the measurement's profile; the twin's family draws 0.6-1)
 MU_D_RATIOS = (0.6, 0.8, 1.0)
 
@@ -66,6 +73,9 @@ class WidthConstants:
             that states none).
         sg_window_s, sg_polyorder: ``abu measure``'s Savitzky-Golay estimator.
         horizon_s: longest emergence followed after the onset [s].
+        kinematics: the kinematics of the measurement predicted: ``"savgol"`` (the default
+            estimator) or ``"drive-model"`` (the module doc).
+        drive_model_error_rel: the drive model's discrepancy floor on omega_dot [1].
     """
 
     k_emerge: float = 3.0
@@ -78,6 +88,15 @@ class WidthConstants:
     sg_window_s: float = SG_WINDOW_S
     sg_polyorder: int = SG_POLYORDER
     horizon_s: float = 0.2
+    kinematics: str = "savgol"
+    drive_model_error_rel: float = DRIVE_MODEL_ERROR_REL
+
+    def __post_init__(self) -> None:
+        if self.kinematics not in KINEMATICS:
+            raise ParameterError("kinematics", self.kinematics, " or ".join(KINEMATICS))
+        if not (math.isfinite(self.theta_harmonic_rad) and self.theta_harmonic_rad >= 0):
+            raise ParameterError("theta_harmonic_rad", self.theta_harmonic_rad,
+                                 "a lens prior >= 0 rad")
 
 
 #: The calibrated constants (docs/design.md, "Predicted width"): ``python
@@ -86,23 +105,54 @@ CALIBRATED = WidthConstants(k_emerge=0.0556, sigma_beta_rad=6.52e-4, sigma_theta
                             z_low=2.80, range_log_low=-0.273, range_log_high=0.192)
 
 
-def with_camera_noise(constants: WidthConstants, summaries: list[dict]) -> WidthConstants:
-    """The constants with theta's and beta's noise of this camera: the medians over ``abu
-    measure`` summaries of earlier recordings (``noise.sigma_theta_rad``; beta: the model
-    fit's white and leftover noise in quadrature); unchanged where the summaries lack them."""
-    from dataclasses import replace
+def _numbers(values: list, low: float, low_ok: bool) -> list[float]:
+    """The finite numbers of ``values`` above ``low`` (or at it, ``low_ok``): what a summary
+    states, anything else (missing, text, booleans, NaN) left out."""
+    return [float(x) for x in values
+            if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+            and (x > low or (low_ok and x == low))]
 
-    th, be = [], []
+
+def _field(obj: object, *keys: str) -> object:
+    """obj[k1][k2]...; None where a level is missing or not an object."""
+    for k in keys:
+        if not isinstance(obj, dict):
+            return None
+        obj = obj.get(k)
+    return obj
+
+
+def with_recorded_setup(constants: WidthConstants, summaries: list[dict]) -> WidthConstants:
+    """The constants of the set-up that ``abu measure`` summaries of earlier recordings show
+    (medians over them; unchanged where the summaries lack a figure):
+
+    * theta's and beta's noise of this camera and lighting (``noise.sigma_theta_rad``; beta:
+      the model fit's white and leftover noise in quadrature);
+    * the lens prior: ``camera.theta_harmonic_prior.theta_harmonic_rad`` of a summary measured
+      with a calibrated camera (``--camera``), the family prior of one measured without;
+    * the kinematics: ``"drive-model"`` where most summaries were measured with the drive
+      model's kinematics accepted (``estimator.name``), else the default's.
+    """
+    th, be, lens, kin = [], [], [], []
     for s in summaries:
-        th.append((s.get("noise") or {}).get("sigma_theta_rad"))
-        nm = (s.get("model_fit") or {}).get("noise_model") or {}
-        if nm.get("sigma_white_rad") is not None:
-            be.append(math.hypot(nm["sigma_white_rad"], nm.get("sigma_leftover_rad") or 0.0))
-    th = [x for x in th if isinstance(x, (int, float)) and x > 0]
-    be = [x for x in be if x > 0]
-    return replace(constants,
-                   sigma_theta_rad=float(np.median(th)) if th else constants.sigma_theta_rad,
-                   sigma_beta_rad=float(np.median(be)) if be else constants.sigma_beta_rad)
+        th.append(_field(s, "noise", "sigma_theta_rad"))
+        white = _numbers([_field(s, "model_fit", "noise_model", "sigma_white_rad")], 0.0, True)
+        left = _numbers([_field(s, "model_fit", "noise_model", "sigma_leftover_rad")], 0.0, True)
+        if white:
+            be.append(math.hypot(white[0], left[0] if left else 0.0))
+        if isinstance(s.get("estimator"), dict):   # the measurement's own record of its set-up
+            prior = _field(s, "camera", "theta_harmonic_prior", "theta_harmonic_rad")
+            lens.append(THETA_HARMONIC_RAD if prior is None else prior)
+            kin.append(s["estimator"].get("name") == "drive-model")
+    th, be = _numbers(th, 0.0, False), _numbers(be, 0.0, False)
+    lens = _numbers(lens, 0.0, True)
+    return replace(
+        constants,
+        sigma_theta_rad=float(np.median(th)) if th else constants.sigma_theta_rad,
+        sigma_beta_rad=float(np.median(be)) if be else constants.sigma_beta_rad,
+        theta_harmonic_rad=float(np.median(lens)) if lens else constants.theta_harmonic_rad,
+        kinematics=("drive-model" if sum(kin) > len(kin) / 2 else "savgol") if kin
+        else constants.kinematics)
 
 
 @dataclass
@@ -194,10 +244,21 @@ def _deviation(q: np.ndarray, w2: np.ndarray, wa: np.ndarray, h: float, lever: f
     return out
 
 
+def _timing_bar(t: np.ndarray, alpha: np.ndarray, i: np.ndarray, delta_s: float) -> np.ndarray:
+    """The drive model's timing bar at samples ``i``, relative to |omega_dot| there [1]: half
+    omega_dot's change over +- ``delta_s`` (``measurement.kinematics.drive_model``'s
+    ``step_sigma``: a digital controller's sample, or a frame next to a step of a continuous
+    one). It is large where the slip falls on the acceleration jump of a lag-free loop."""
+    up = np.interp(t[i] + delta_s, t, alpha)
+    down = np.interp(t[i] - delta_s, t, alpha)
+    return 0.5 * np.abs(up - down) / np.maximum(np.abs(alpha[i]), 1e-300)
+
+
 def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray,
                    mus: np.ndarray | float, lever: float,
                    constants: WidthConstants = CALIBRATED,
-                   mu_d_ratios: tuple[float, float, float] = MU_D_RATIOS) -> WidthPrediction:
+                   mu_d_ratios: tuple[float, float, float] = MU_D_RATIOS,
+                   controller_sample_time_s: float | None = None) -> WidthPrediction:
     """The relative width ``abu measure`` will report at each true mu (see the module doc).
 
     Args:
@@ -209,6 +270,8 @@ def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_do
         mu_d_ratios: mu_d / mu at the range's low end, its expected value and its high end
             (a plan does not know mu_d: :data:`MU_D_RATIOS`; the benchmarks pass the true one
             to show what knowing it would buy).
+        controller_sample_time_s: the digital controller's sample time [s] (None: a
+            continuous one, timed to a frame): the drive-model kinematics' timing bar.
     """
     c = constants
     t = np.asarray(t, float)
@@ -245,10 +308,16 @@ def predict_widths(t: np.ndarray, theta: np.ndarray, omega: np.ndarray, omega_do
 
     # kinematic errors at the slip (measured view)
     a_s, w_s = np.abs(a_m[i_sc]), np.abs(w_m[i_sc])
-    noise = np.hypot(c.sigma_theta_rad * g2 / a_s, 2.0 * c.sigma_theta_rad * g1 / w_s)
-    trunc = bias[i_sc] / a_s
     lens = c.theta_harmonic_rad * (w_s * w_s / a_s + 2.0)
-    lo = lower * np.maximum(1.0 - c.z_low * noise - trunc - lens, 0.0)[:, None]
+    if c.kinematics == "drive-model":   # the fit's floor, no truncation, one model error
+        noise = np.hypot(c.drive_model_error_rel,
+                         _timing_bar(t, np.asarray(omega_dot, float), i_sc,
+                                     controller_sample_time_s or h))
+        trunc, z_low = np.zeros(mus.size), Z95
+    else:
+        noise = np.hypot(c.sigma_theta_rad * g2 / a_s, 2.0 * c.sigma_theta_rad * g1 / w_s)
+        trunc, z_low = bias[i_sc] / a_s, c.z_low
+    lo = lower * np.maximum(1.0 - z_low * noise - trunc - lens, 0.0)[:, None]
     hi = upper * (1.0 + Z95 * noise + trunc + lens)[:, None]
     with np.errstate(invalid="ignore"):   # a null bound (NaN / inf) is set to inf below
         width = (hi - lo) / (0.5 * (hi + lo))

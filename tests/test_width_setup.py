@@ -1,0 +1,138 @@
+"""The width model for the set-up a measurement will use (harness.planning.width_model).
+
+* a calibrated camera's lens prior, read from ``abu measure --camera`` summaries
+  (``--noise-from``, ``abu next``), scales the lens part exactly as A (lever / mu + 2);
+* the drive-model kinematics (``--kinematics drive-model``, or summaries measured with it): the
+  kinematic error is the fit's 1 % floor and its timing bar (closed form on a polynomial
+  motion), no truncation, z on the lower bound;
+* what a summary cannot say (missing, text, NaN, booleans) leaves the constants as they are;
+  options that do not apply (a tracking drive) are refused by name.
+
+The benchmark that checks these predictions against rendered, calibrated and measured runs is
+``benchmarks/bench_designed_runs.py --camera 30 --kinematics drive-model`` (README).
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from abu.cli.main import main
+from abu_model.errors import ParameterError
+from abu_model.params import BallParams
+from harness.planning import width_model as wm
+
+LEVER = BallParams().lever_ratio
+
+
+def _motion(fps: float = 4500.0, n: int = 3072):
+    """A polynomial motion whose SG view is exact: omega_dot = j t (mu_req rising)."""
+    t = np.arange(n) / fps
+    w0, j = -300.0, 1000.0
+    return t, w0 * t + j * t**3 / 6, w0 + j * t**2 / 2, j * t
+
+
+def _summary(lens: float | None = None, estimator: str = "savgol", **extra) -> dict:
+    s = {"kind": "abu-measure-summary", "mu_low": 0.02, "mu_high": 0.04,
+         "noise": {"sigma_theta_rad": 2.14e-4},
+         "model_fit": {"noise_model": {"sigma_white_rad": 5e-4, "sigma_leftover_rad": 4e-4}},
+         "estimator": {"name": estimator}}
+    if lens is not None:
+        s["camera"] = {"theta_harmonic_prior": {"theta_harmonic_rad": lens}}
+    return {**s, **extra}
+
+
+def test_a_calibrated_lens_prior_scales_the_lens_part_exactly():
+    t, th, w, a = _motion()
+    mu = np.array([0.02])
+    base = wm.predict_widths(t, th, w, a, mu, LEVER, wm.CALIBRATED)
+    cal = wm.with_recorded_setup(wm.CALIBRATED, [_summary(2e-4), _summary(3e-4),
+                                                 _summary(1e-3)])
+    assert cal.theta_harmonic_rad == pytest.approx(3e-4)          # the median of three
+    p = wm.predict_widths(t, th, w, a, mu, LEVER, cal)
+    assert p.lens[0] == pytest.approx(base.lens[0] * 3e-4 / wm.THETA_HARMONIC_RAD, rel=1e-12)
+    assert p.kinematic_noise[0] == base.kinematic_noise[0]        # the rest unchanged
+    assert p.expected[0] < base.expected[0]
+    # a summary measured without a camera counts as the family prior (8e-4)
+    mixed = wm.with_recorded_setup(wm.CALIBRATED, [_summary(2e-4), _summary(), _summary()])
+    assert mixed.theta_harmonic_rad == pytest.approx(wm.THETA_HARMONIC_RAD)
+
+
+def test_drive_model_kinematics_have_the_fits_floor_and_timing_bar():
+    t, th, w, a = _motion()
+    mu = np.array([0.02])
+    c = wm.with_recorded_setup(wm.CALIBRATED, [_summary(estimator="drive-model")] * 2
+                               + [_summary()])
+    assert c.kinematics == "drive-model"                            # 2 of 3
+    p = wm.predict_widths(t, th, w, a, mu, LEVER, c)
+    sg = wm.predict_widths(t, th, w, a, mu, LEVER, wm.CALIBRATED)
+    i = int(np.argmin(np.abs(t - p.t_slip_s[0])))
+    h = t[1] - t[0]
+    # omega_dot = j t: half its change over +- one frame, relative, is h / t
+    assert p.kinematic_noise[0] == pytest.approx(math.hypot(0.01, h / t[i]), rel=1e-9)
+    assert p.truncation[0] == 0.0
+    # a 1 ms controller sample widens the timing bar 4.5x
+    ms = wm.predict_widths(t, th, w, a, mu, LEVER, c, controller_sample_time_s=1e-3)
+    assert ms.kinematic_noise[0] == pytest.approx(math.hypot(0.01, 1e-3 / t[i]), rel=1e-9)
+    assert ms.expected[0] > p.expected[0]
+    assert sg.constants.kinematics == "savgol" and p.constants.kinematics == "drive-model"
+
+
+@pytest.mark.parametrize("bad", [
+    {"camera": "calibrated"}, {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": "x"}}},
+    {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": float("nan")}}},
+    {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": True}}},
+    {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": -1e-4}}},
+    {"noise": [1, 2]}, {"model_fit": {"noise_model": {"sigma_white_rad": "5e-4"}}},
+])
+def test_what_a_summary_cannot_say_leaves_the_constants(bad):
+    s = {"kind": "abu-measure-summary", "estimator": {"name": "savgol"}, **bad}
+    c = wm.with_recorded_setup(wm.CALIBRATED, [s])
+    assert c.theta_harmonic_rad == wm.THETA_HARMONIC_RAD
+    assert c.sigma_theta_rad == wm.CALIBRATED.sigma_theta_rad
+    assert c.sigma_beta_rad == wm.CALIBRATED.sigma_beta_rad
+    with pytest.raises(ParameterError, match="kinematics"):
+        wm.WidthConstants(kinematics="spline")
+    with pytest.raises(ParameterError, match="theta_harmonic_rad"):
+        wm.WidthConstants(theta_harmonic_rad=-1.0)
+
+
+def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
+    """``abu design --noise-from`` and ``abu next`` on summaries measured with a calibrated
+    camera and the drive model predict with their lens prior and kinematics; ``--kinematics``
+    overrides; with a tracking drive both options are refused by name."""
+    paths = []
+    for k, lens in enumerate((2.5e-4, 3.5e-4)):
+        p = tmp_path / f"s{k}.json"
+        p.write_text(json.dumps(_summary(lens, "drive-model")))
+        paths.append(str(p))
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)["width_prediction"]
+    assert plain["kinematics"] == "savgol"
+    assert plain["camera_noise"]["theta_harmonic_rad"] == pytest.approx(8e-4)
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--json",
+                 "--noise-from", *paths]) == 0
+    cam = json.loads(capsys.readouterr().out)["width_prediction"]
+    assert cam["kinematics"] == "drive-model"
+    assert cam["camera_noise"]["theta_harmonic_rad"] == pytest.approx(3e-4)
+    for row in cam["table"]:
+        assert row["lens"] == pytest.approx(3e-4 * (LEVER / row["mu"] + 2), rel=0.25)
+        assert row["truncation"] == 0.0 and row["kinematic_noise"] >= 0.01
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--json",
+                 "--noise-from", *paths, "--kinematics", "savgol"]) == 0
+    assert json.loads(capsys.readouterr().out)["width_prediction"]["kinematics"] == "savgol"
+    assert main(["next", *paths, "--no-check", "--json"]) == 0
+    w = json.loads(capsys.readouterr().out)["design"]["width_prediction"]
+    assert w["kinematics"] == "drive-model"
+    assert w["camera_noise"]["theta_harmonic_rad"] == pytest.approx(3e-4)
+    tracking = tmp_path / "tracking.json"
+    tracking.write_text(json.dumps({"kind": "abu-drive", "format_version": 1,
+                                    "model": "tracking", "bandwidth_rad_s": 100.0,
+                                    "tau_motor_s": 0.002}))
+    for option in (["--kinematics", "drive-model"], ["--noise-from", paths[0]]):
+        assert main(["design", "--mu-range", "0.02", "0.04", "--drive", str(tracking),
+                     *option]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and option[0] in err[0], err
