@@ -22,6 +22,10 @@ and ``POSITION_SD`` (where mu lies in a measured interval) were measured on seed
     nice python benchmarks/bench_next_runs.py --cases 40 --first 1000 --jobs 2 --rows v.jsonl
     python benchmarks/bench_next_runs.py --report v.jsonl      # figures of saved rows
     python benchmarks/bench_next_runs.py --calibrate c.jsonl   # where mu lies (seeds 0-47)
+
+``--camera VIEWS``: every run's lens calibrated on that many chessboard views and measured with
+``abu measure --camera`` (``bench_designed_runs.py --camera``); ``abu next`` then predicts with
+the calibration's lens prior, which the summaries state.
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from bench_designed_runs import DRIVES, RATIO_BAND, abu_main, configs, draw, \
+from bench_designed_runs import CAMERA_VIEWS, DRIVES, RATIO_BAND, abu_main, configs, draw, \
     random_scenario, render_measure, run_design  # noqa: E402
 
 #: offset of the sensor-noise seed of runs 2 and 3 (the scenario's set-up stays the seed's)
@@ -218,7 +222,13 @@ def main() -> None:
                                                    "(predicted with the current rule)")
     ap.add_argument("--calibrate", default=None, help="print where mu lies in the combined "
                                                       "intervals of saved rows and exit")
+    ap.add_argument("--camera", type=int, default=0, metavar="VIEWS",
+                    help="calibrate the lens on this many chessboard views and measure every "
+                         "run with 'abu measure --camera' (abu next then reads the "
+                         "calibration's lens prior from the summaries)")
     a = ap.parse_args()
+    if a.camera:   # before the worker pool forks
+        CAMERA_VIEWS.append(a.camera)
     if a.calibrate:
         calibrate([json.loads(x) for x in Path(a.calibrate).read_text().splitlines() if x])
         return
