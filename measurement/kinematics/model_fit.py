@@ -280,7 +280,8 @@ def model_kinematics(fallback: Kinematics, theta: np.ndarray, inp: Any
     refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
     fit = inp.fit(fallback.time, theta, fallback.sigma_theta)
     info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
-            "why": fit.why, "loop": fit.loop or getattr(inp, "loop_description", "from the drive file"),
+            "why": fit.why,
+            "loop": fit.loop or getattr(inp, "loop_description", "from the drive file"),
             "theta_harmonics_fitted": bool(fit.accepted and getattr(
                 inp, "theta_harmonics_fitted", False))}
     if not fit.accepted:
