@@ -130,21 +130,41 @@ def test_a_nearly_continuous_controller_is_found_continuous():
     assert _rms(err_m) < 0.2 * _rms(err_sg)
 
 
+def test_the_loops_own_continuous_records_are_found_continuous():
+    """Records of the continuous loop's exact motion (test_drive_model's, lens pattern and
+    noise added; its staircase's round step times leave continuous, the frame interval and
+    0.4 ms to tell apart): accepted and found continuous in >= 4 of 5."""
+    from test_drive_model import SP, record
+    found = []
+    for seed in range(5):
+        t, th, alpha = record(seed)[:3]
+        fit = UnknownLoopInput(setpoints=SP).fit(t, th, SIGMA)
+        found.append(fit.accepted and fit.params["controller_sample_time_s"] == 0.0)
+        assert fit.params["sample_times_tried"] == 3.0
+    print(f"\nthe continuous loop's own records: accepted and found continuous in "
+          f"{sum(found)} of 5")
+    assert sum(found) >= 4
+
+
 def test_the_candidate_sample_times():
     """Continuous, the frame interval, the common rates; a rate within 1 % of the frame
     interval once (5000 frames/s is the 5 kHz rate); none at or above the shortest step
-    spacing."""
+    spacing; none that moves no step (steps on its grid: the continuous model)."""
     from abu_model.loop_response import Setpoints
-    sp = Setpoints((0.1, 0.2, 0.3), (-60.0, -66.0, -72.0, -78.0))
+    sp = Setpoints((0.10003, 0.20007, 0.30011), (-60.0, -66.0, -72.0, -78.0))
     assert sample_time_search.candidates(1 / 4500, sp) == [None, 1 / 4500] + [
         1 / r for r in (1000, 2000, 2500, 4000, 5000, 8000, 10000)]
     assert sample_time_search.candidates(1 / 5000, sp) == [None, 1 / 5000] + [
         1 / r for r in (1000, 2000, 2500, 4000, 8000, 10000)]
-    tight = Setpoints((0.1, 0.1004, 0.2), (-60.0, -66.0, -72.0, -78.0))   # 0.4 ms apart
+    tight = Setpoints((0.10003, 0.10042, 0.20007), (-60.0, -66.0, -72.0, -78.0))  # 0.39 ms
     assert sample_time_search.candidates(1 / 4500, tight) == [None, 1 / 4500] + [
         1 / r for r in (4000, 5000, 8000, 10000)]
     slow = sample_time_search.candidates(0.25, sp)           # a 4 frames/s camera
     assert 0.25 not in slow and slow[0] is None
+    # test_drive_model's staircase, every 45 ms from 30 ms: on the 1, 0.5, 0.25, 0.2, 0.125
+    # and 0.1 ms grids (the same model as continuous), not on the frame interval's or 0.4 ms
+    round_steps = Setpoints(tuple(0.03 + 0.045 * k for k in range(10)), tuple(range(11)))
+    assert sample_time_search.candidates(1 / 4500, round_steps) == [None, 1 / 4500, 1 / 2500]
 
 
 @pytest.mark.parametrize("sample_time", [1.0 / FPS, FIND])
@@ -164,7 +184,8 @@ def test_a_wrong_staircase_is_refused_or_covered(sample_time):
         else:
             assert "fitted freely" in fit.why
             if sample_time == FIND:   # the refusal says what was tried
-                assert "every controller sample time tried was refused (9 scored: " \
+                n_cands = len(sample_time_search.candidates(t[1] - t[0], wrong))
+                assert f"every controller sample time tried was refused ({n_cands} scored: " \
                        "continuous, 0.000222 s, 0.001 s" in fit.why, fit.why
     assert bad == 0
 

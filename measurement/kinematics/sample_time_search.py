@@ -12,7 +12,10 @@ record even where it is shorter than the frame interval.
 (a camera and controller on one clock, as the twin's), and the common controller rates of
 :data:`CONTROLLER_RATES_HZ`; a sample time at or above the staircase's shortest step spacing
 is dropped (two steps would share a sample, which the model cannot hold), and so is a rate
-within 1 % of one already listed (a 5000 frames/s camera's interval is the 5 kHz rate).
+within 1 % of one already listed (a 5000 frames/s camera's interval is the 5 kHz rate), and
+one that moves no step from where an earlier candidate puts it (a staircase whose step times
+are round, e.g. every 45 ms from 30 ms, lies on the 0.1, 0.125, 0.2, 0.25, 0.5 and 1 ms grids:
+those controllers are the continuous model there, and are not told from it).
 
 **Search** (:func:`find_sample_time`): fitting every candidate from the scored starts would
 take 1-3 s each. So the loop is fitted as with a stated sample time for the frame interval
@@ -31,7 +34,7 @@ import math
 
 import numpy as np
 
-from abu_model.loop_response import Setpoints
+from abu_model.loop_response import Setpoints, sampled
 from controller.drive import Drive
 
 from measurement.kinematics.drive_model import quick_fit
@@ -53,14 +56,23 @@ N_REFITS = 2
 
 def candidates(frame_interval_s: float, setpoints: Setpoints) -> list[float | None]:
     """The sample times tried [s], None (a continuous controller) first, then the frame
-    interval, then :data:`CONTROLLER_RATES_HZ`'s (module doc)."""
+    interval, then :data:`CONTROLLER_RATES_HZ`'s (module doc). A sample time that puts every
+    step where another candidate does (steps on its grid already: a staircase of round step
+    times) is the same model and is left out, the first listed kept."""
     gaps = np.diff(np.asarray(setpoints.step_times, float))
     shortest = float(np.min(gaps)) if gaps.size else math.inf
     out: list[float | None] = [None]
+    applied = [np.asarray(setpoints.step_times, float)]
     for period in (frame_interval_s,) + tuple(1.0 / r for r in CONTROLLER_RATES_HZ):
-        if period < shortest and period <= MAX_SAMPLE_TIME_S and all(
-                abs(period - q) > SAME_REL * q for q in out if q is not None):
-            out.append(period)
+        if not (period < shortest and period <= MAX_SAMPLE_TIME_S) or any(
+                abs(period - q) <= SAME_REL * q for q in out if q is not None):
+            continue
+        steps = np.asarray(sampled(setpoints, period).step_times, float)
+        if any(a.size == steps.size and np.allclose(a, steps, rtol=0.0, atol=1e-9)
+               for a in applied):
+            continue
+        out.append(period)
+        applied.append(steps)
     return out
 
 
