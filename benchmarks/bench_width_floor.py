@@ -52,6 +52,12 @@ two-spot): 18.8 % = 0.98x exact (known drive 0.98x, default 1.79x), 100 %, no mi
 2 of 110; unseen ``--first 7000 --n 90 --two-spot 10``: 22.0 % = 0.93x (default 1.73x), 100 %,
 no miss, refused on 1 of 100; ``--first 9000 --n 50 --two-spot 0``: 17.9 % = 1.03x (default
 1.94x), 100 %, no miss, refused on 0 of 50.
+``sample time found`` (``--find-sample-time``): the ``loop unknown`` options with the
+staircase's controller sample time left to the search
+(:mod:`measurement.kinematics.sample_time_search`). Measured (``--first 9100 --n 40
+--two-spot 0 --find-sample-time``, 24 staircase recordings): accepted on 24 of 24, the frame
+interval found on 23 (0.25 ms on 1), coverage 100 %, no miss, staircase median 17.4 % = 1.02x
+exact, as ``loop unknown`` with it stated (and ``known drive``).
 
 Measured (seeds 0..99 + 10 two-spot): median width default 34.6 %, exact kinematics 18.7 %,
 ``known drive`` 19.4 % (1.01x exact; staircase 1.08x, profile 0.94x: the profile model fits
@@ -111,6 +117,7 @@ from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from measurement.inference.lighting_models import alternative_orders  # noqa: E402
+from measurement.kinematics.unknown_loop import FIND  # noqa: E402
 from measurement.imaging.camera import read_camera  # noqa: E402
 from measurement.pipeline import MarkerTracks, measure_tracks  # noqa: E402
 from twin.calibration_target import DEFAULT_VIEWS  # noqa: E402
@@ -123,6 +130,10 @@ from lens_calibration import calibrate  # noqa: E402
 MEASURED_KINEMATICS = analysis._kinematics
 KNOWN = "known drive"
 UNKNOWN = "loop unknown"
+#: ``--find-sample-time``: the ``loop unknown`` options without ``--controller-sample-time``
+#: (a staircase's sample time found from the record; a profile's as ``loop unknown``)
+FOUND = "sample time found"
+FIND_SAMPLE_TIME = False   # set by main() before any worker is forked
 EXACT, NO_LENS = "exact kinematics", "exact, no lens prior"
 #: ``--camera`` rows: name -> (``known drive`` options instead of the default, exact kinematics)
 CAMERA_ROWS = {"default + camera": (False, False), "known drive + camera": (True, False),
@@ -259,6 +270,14 @@ def one(job: tuple[int, str | None, int]) -> dict:
     row["bounds"][UNKNOWN] = (s["mu_low"], s["mu_high"])
     row["model_unknown"] = s["estimator"].get("model")
     row["why_unknown"] = s["estimator"].get("why", "")
+    if FIND_SAMPLE_TIME:
+        if scn.drive.kind == "staircase_pi":
+            s = summary(scn, tracks, replace(unknown, drive_model=replace(
+                unknown.drive_model, sample_time_s=FIND)))
+        row["bounds"][FOUND] = (s["mu_low"], s["mu_high"])
+        row["model_found"], row["loop_found"] = s["estimator"].get("model"), s["estimator"].get(
+            "loop")
+        row["why_found"] = s["estimator"].get("why", "")
     if views:
         camera, row["cal"] = calibrated_camera(scn, views)
         for name, (drive_known, exact) in CAMERA_ROWS.items():
@@ -301,7 +320,8 @@ def per_recording_ratio(rows: list[dict], name: str, ref: str) -> float:
 
 def names(rows: list[dict]) -> list[str]:
     """The analyses of the run: the camera rows where ``--camera`` added them."""
-    return [*ANALYSES, KNOWN] + [n for n in (UNKNOWN, *CAMERA_ROWS) if n in rows[0]["bounds"]]
+    return [*ANALYSES, KNOWN] + [n for n in (UNKNOWN, FOUND, *CAMERA_ROWS)
+                                 if n in rows[0]["bounds"]]
 
 
 def report(rows: list[dict]) -> None:
@@ -344,7 +364,8 @@ def by_kind(rows: list[dict], analyses: list[str], refs: list[str]) -> None:
 def report_by_kind(rows: list[dict]) -> None:
     """Default, known drive and exact per drive kind; width ratios to the exact row on the
     recordings where both are finite; the model's refusals."""
-    by_kind(rows, ["42 ms (default)", KNOWN] + [UNKNOWN] * (UNKNOWN in rows[0]["bounds"])
+    by_kind(rows, ["42 ms (default)", KNOWN] + [n for n in (UNKNOWN, FOUND)
+                                                if n in rows[0]["bounds"]]
             + [EXACT, NO_LENS], [EXACT])
     for r in rows:
         if r["model"] != "accepted":
@@ -355,6 +376,15 @@ def report_by_kind(rows: list[dict]) -> None:
               "used there)")
     for r in unknown:
         print(f"    seed {r['seed']} ({r['kind']}): {r['why_unknown']}")
+    if FOUND in rows[0]["bounds"]:
+        found = [r for r in rows if r.get("model_found") != "accepted"]
+        print(f"  {FOUND}: refused on {len(found)} of {len(rows)}")
+        for r in found:
+            print(f"    seed {r['seed']} ({r['kind']}): {r['why_found']}")
+        loops = [r["loop_found"] for r in rows if r["kind"] == "staircase_pi"
+                 and r.get("model_found") == "accepted"]
+        for loop in sorted(set(loops)):
+            print(f"    {loops.count(loop)} staircases: {loop}")
 
 
 def report_camera(rows: list[dict]) -> None:
@@ -412,9 +442,14 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=DEFAULT_VIEWS,
                     help=f"calibration views with --camera (default {DEFAULT_VIEWS})")
     ap.add_argument("--out", default=None, help="write the per-recording rows here (JSON lines)")
+    ap.add_argument("--find-sample-time", action="store_true",
+                    help="also the 'loop unknown' row with the staircase's controller sample "
+                         "time left to the search (row 'loop, sample time unknown')")
     ap.add_argument("--report", default=None,
                     help="print the tables of rows written by --out (nothing is run)")
     a = ap.parse_args()
+    global FIND_SAMPLE_TIME
+    FIND_SAMPLE_TIME = a.find_sample_time
     if a.report:
         rows = [json.loads(line) for line in open(a.report)]
         print(f"rows of {a.report}: {len(rows)} recordings")

@@ -151,10 +151,13 @@ def test_measure_names_each_bad_staircase_option_and_refuses_them_without_the_mo
 
 
 # ------------------------------------------------- the harsh twin's digital PI with a filter
-def _twin_record(seed: int, setpoint_tau: float, tau_motor: float | None = None):
+def _twin_record(seed: int, setpoint_tau: float, tau_motor: float | None = None, *,
+                 fps: float = FPS, every: int = 1):
     """(t, theta measured, true omega_dot, DriveSpec, setpoints) of the harsh twin's digital PI
     drive (controller at the frame rate, Euler integrator, first-order-hold torque: an
-    implementation independent of the closed form) with lens pattern and tracking noise."""
+    implementation independent of the closed form) with lens pattern and tracking noise.
+    ``every`` > 1: the controller runs at ``every`` x ``fps`` and the camera films every
+    ``every`` th of its samples (the twin's controller samples at its time grid)."""
     from controller.reference import Staircase
     from twin.drives import DriveSpec, rotor_mu_req
     rng = np.random.default_rng([seed, 18])
@@ -165,8 +168,9 @@ def _twin_record(seed: int, setpoint_tau: float, tau_motor: float | None = None)
                      zeta=rng.uniform(0.6, 1.0), omega_n=rng.uniform(8.0, 30.0),
                      setpoint_weight=rng.uniform(0.5, 1.0), setpoint_tau=setpoint_tau,
                      rounding=str(rng.choice(["lead", "nearest", "trail"])))
-    t = np.arange(2400) / FPS
-    r = rotor_mu_req(spec, t)
+    t = np.arange(2400) / fps
+    r = {k: v[::every] for k, v in rotor_mu_req(spec, np.arange(2400 * every) / (fps * every)
+                                                ).items()}
     lens = 4e-4 * np.cos(r["theta"] + rng.uniform(0, TWO_PI))
     theta = 1.0 + r["theta"] + lens + SIGMA * rng.standard_normal(t.size)
     stair = Staircase(spec.omega0, spec.omega_end, spec.t0, spec.te, rounding=spec.rounding)

@@ -5,8 +5,9 @@ given as in ``abu simulate`` (``--omega0-hz --omega-end-hz --t0 --te --step-hz -
 a ``tracking`` drive followed a prescribed profile, ``--profile profile.json`` (``abu
 design``). Times are on the recording's clock (the fit adds a time offset within +- 50 ms for
 the camera's trigger). Without ``--drive`` the loop is unknown and fitted freely from the
-record (:mod:`measurement.kinematics.unknown_loop`); a digital controller's sample time is then
-``--controller-sample-time``.
+record (:mod:`measurement.kinematics.unknown_loop`); a staircase's controller sample time is
+then ``--controller-sample-time`` (seconds, or ``continuous``), or, left out, found from the
+record among candidates (:mod:`measurement.kinematics.sample_time_search`).
 """
 from __future__ import annotations
 
@@ -41,10 +42,23 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
                    help="setpoint resolution [Hz] (default 1)")
     g.add_argument("--rounding", choices=["lead", "nearest", "trail"], default="lead",
                    help="when each step happens on the sine (default lead: the report's)")
-    g.add_argument("--controller-sample-time", type=float, default=None, metavar="S",
-                   help="without --drive: the digital speed controller's sample time [s] "
-                        "(default: a continuous controller; a digital one fitted as "
-                        "continuous is mostly refused)")
+    g.add_argument("--controller-sample-time", type=_sample_time_arg, default=None,
+                   metavar="S", help="without --drive: the digital speed controller's sample "
+                   "time [s], or 'continuous' for an analogue one (default: found from the "
+                   "record among continuous, the frame interval and 1-10 kHz; summary.json "
+                   "estimator.loop names the one found)")
+
+
+def _sample_time_arg(text: str) -> float | str:
+    """``--controller-sample-time``: a number of seconds or the word ``continuous`` (its
+    range is checked with the staircase, :func:`_unknown_loop_input`)."""
+    if text.strip().lower() == "continuous":
+        return "continuous"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"a sample time [s] or 'continuous', not {text!r}") from None
 
 
 def drive_model_from_args(args: argparse.Namespace):
@@ -99,7 +113,7 @@ def _staircase(args: argparse.Namespace):
 def _unknown_loop_input(args: argparse.Namespace):
     """The staircase or profile with the loop left to the fit (no ``--drive``)."""
     from controller.profile import load_profile
-    from measurement.kinematics.unknown_loop import UnknownLoopInput
+    from measurement.kinematics.unknown_loop import FIND, UnknownLoopInput
 
     sample_time = args.controller_sample_time
     if not args.profile and args.omega0_hz is None:
@@ -110,15 +124,18 @@ def _unknown_loop_input(args: argparse.Namespace):
     if args.profile:
         return UnknownLoopInput(profile=load_profile(args.profile))
     setpoints = _staircase(args)
-    if sample_time is not None:
-        gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
-        if not (math.isfinite(sample_time) and 0 < sample_time <= 0.1):
-            raise ParameterError("--controller-sample-time", sample_time,
-                                 "a sample time in (0, 0.1] s")
-        if gaps and min(gaps) <= sample_time:
-            raise ParameterError("--controller-sample-time", sample_time,
-                                 f"a sample time below the staircase's shortest step spacing "
-                                 f"({min(gaps):.3g} s): steps would share a sample")
+    if sample_time is None:      # not stated: found from the record
+        return UnknownLoopInput(setpoints=setpoints, sample_time_s=FIND)
+    if sample_time == "continuous":
+        return UnknownLoopInput(setpoints=setpoints, sample_time_s=None)
+    gaps = [b - a for a, b in zip(setpoints.step_times, setpoints.step_times[1:])]
+    if not (math.isfinite(sample_time) and 0 < sample_time <= 0.1):
+        raise ParameterError("--controller-sample-time", sample_time,
+                             "a sample time in (0, 0.1] s, or 'continuous'")
+    if gaps and min(gaps) <= sample_time:
+        raise ParameterError("--controller-sample-time", sample_time,
+                             f"a sample time below the staircase's shortest step spacing "
+                             f"({min(gaps):.3g} s): steps would share a sample")
     return UnknownLoopInput(setpoints=setpoints, sample_time_s=sample_time)
 
 

@@ -68,11 +68,11 @@ class _Model:
     """theta, omega, omega_dot of the parametrised drive at the frame times."""
 
     def __init__(self, time: np.ndarray, drive: Drive, setpoints: Setpoints,
-                 settings: DriveModelSettings):
+                 settings: DriveModelSettings, t_off_s: float = 0.0):
         self.t, self.sp = time, sampled(setpoints, drive.sample_time)
         self.sample_time = drive.sample_time
         self.names = ["t_off_s"]
-        self.x0 = [0.0]
+        self.x0 = [t_off_s]
         self.lo = [-settings.t_off_max_s]
         self.hi = [settings.t_off_max_s]
         self.prior: list[tuple[int, float, float]] = []   # (index, centre, sigma)
@@ -146,8 +146,10 @@ class _Model:
 
 def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints, *,
                     sigma_theta: float | None = None,
-                    settings: DriveModelSettings | None = None) -> DriveFit:
-    """Fit the drive model to theta(t) over the whole record (see the module doc)."""
+                    settings: DriveModelSettings | None = None,
+                    t_off_s: float = 0.0) -> DriveFit:
+    """Fit the drive model to theta(t) over the whole record (see the module doc), the time
+    offset started at ``t_off_s`` [s] (a warm start; 0: none known)."""
     st = settings or DriveModelSettings()
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
@@ -160,7 +162,7 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
     if np.sign(slope) != np.sign(levels[0]) or np.any(np.sign(levels) != np.sign(levels[0])):
         return DriveFit(False, f"the record turns at {slope:.4g} rad/s on average, the "
                                f"staircase from {levels[0]:.4g} rad/s: not the same direction")
-    return fit_model(t, th, _Model(t, drive, setpoints, st), sigma, st)
+    return fit_model(t, th, _Model(t, drive, setpoints, st, t_off_s), sigma, st)
 
 
 def start_cost(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints,
@@ -178,3 +180,37 @@ def start_cost(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Set
         r = e - basis @ np.linalg.lstsq(basis, e, rcond=None)[0]
         cost = float(r @ r)
     return cost if math.isfinite(cost) else math.inf
+
+
+def quick_fit(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints,
+              t_off_s: float, settings: DriveModelSettings, max_evaluations: int
+              ) -> tuple[float, dict[str, float]]:
+    """A short least-squares fit of the time offset and the loop (started at ``drive`` and
+    ``t_off_s`` [s]; the linear nuisance terms projected out; no error bars, no tests): the
+    mean square residual [rad^2] and the fitted values by name. Ranks candidate controller
+    sample times of a loop fitted with another one
+    (:mod:`measurement.kinematics.sample_time_search`): refitting the loop matters, as a loop
+    fitted with one sample time has absorbed part of its step timing."""
+    from scipy.optimize import least_squares
+
+    t = np.asarray(time, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    model = _Model(t, drive, setpoints, settings, t_off_s)
+    basis = linear_basis(t, th, settings.harmonics)
+    proj = np.linalg.pinv(basis)
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        e = th - model.evaluate(p)[0]
+        return e - basis @ (proj @ e)
+
+    lo, hi = np.array(model.lo), np.array(model.hi)
+    x0 = np.clip(np.array(model.x0, float), lo + 1e-9, hi - 1e-9)
+    with np.errstate(over="ignore", invalid="ignore"):
+        try:
+            sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
+                                max_nfev=max_evaluations)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            return math.inf, {}
+        cost = 2.0 * float(sol.cost) / t.size
+    return (cost if math.isfinite(cost) else math.inf), dict(zip(model.names,
+                                                                  sol.x.tolist()))

@@ -90,6 +90,8 @@ class DriveFit:
         std: their standard errors.
         omega, omega_dot, sigma_omega, sigma_omega_dot: at the frame times [rad/s, rad/s^2].
         rms_ratio: residual rms / tracking noise [-]; block_p: whiteness p-value per block [s].
+        loop: the loop the fit assumed, where the fit itself decided it (a controller sample
+            time found from the record), for summary.json's ``estimator.loop``; '' otherwise.
     """
 
     accepted: bool
@@ -103,6 +105,7 @@ class DriveFit:
     rms_ratio: float = math.nan
     block_p: dict[str, float] = field(default_factory=dict)
     residual: np.ndarray | None = None
+    loop: str = ""
 
     def summary(self) -> dict:
         """JSON-ready record for summary.json's ``estimator.model``."""
@@ -277,7 +280,8 @@ def model_kinematics(fallback: Kinematics, theta: np.ndarray, inp: Any
     refused; the fit either way (its :meth:`DriveFit.summary` goes into summary.json)."""
     fit = inp.fit(fallback.time, theta, fallback.sigma_theta)
     info = {**fallback.settings, "model": "accepted" if fit.accepted else "refused",
-            "why": fit.why, "loop": getattr(inp, "loop_description", "from the drive file"),
+            "why": fit.why,
+            "loop": fit.loop or getattr(inp, "loop_description", "from the drive file"),
             "theta_harmonics_fitted": bool(fit.accepted and getattr(
                 inp, "theta_harmonics_fitted", False))}
     if not fit.accepted:
