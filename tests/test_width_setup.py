@@ -123,6 +123,15 @@ def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
     assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--json",
                  "--noise-from", *paths, "--kinematics", "savgol"]) == 0
     assert json.loads(capsys.readouterr().out)["width_prediction"]["kinematics"] == "savgol"
+    # the text says what the prediction assumed, and how to state the user's own set-up
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check"]) == 0
+    text = capsys.readouterr().out
+    assert "lens prior 0.0008 rad (uncalibrated" in text and "--noise-from" in text
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--noise-from",
+                 *paths]) == 0
+    text = capsys.readouterr().out
+    assert "lens prior 0.0003 rad (from the summaries)" in text
+    assert "drive-model kinematics" in text
     assert main(["next", *paths, "--no-check", "--json"]) == 0
     w = json.loads(capsys.readouterr().out)["design"]["width_prediction"]
     assert w["kinematics"] == "drive-model"

@@ -232,7 +232,26 @@ def _describe_width(design) -> list[str]:
                      f"{_pct(r['high90'])}; beta profile {_pct(r['profile'])}, lens prior "
                      f"+-{_pct(r['lens'])}, kinematic noise {_pct(r['kinematic_noise'])} "
                      "1 sigma)")
-    return lines
+    return lines + [_assumed(w)]
+
+
+def _assumed(w: dict) -> str:
+    """The set-up the prediction assumed, and how to state yours."""
+    from harness.planning.width_model import CALIBRATED
+    cam = w["camera_noise"]
+    typical = (cam["sigma_theta_rad"] == CALIBRATED.sigma_theta_rad
+               and cam["sigma_beta_rad"] == CALIBRATED.sigma_beta_rad)
+    uncalibrated = cam["theta_harmonic_rad"] == CALIBRATED.theta_harmonic_rad
+    kin = {"savgol": "Savitzky-Golay kinematics (abu measure's default)",
+           "drive-model": "drive-model kinematics"}[w["kinematics"]]
+    return (f"  assumed: theta noise {cam['sigma_theta_rad']:.3g} rad, beta noise "
+            f"{cam['sigma_beta_rad']:.3g} rad ("
+            + ("a typical camera; yours: --noise-from SUMMARY.json ..." if typical
+               else "from the summaries")
+            + f"), lens prior {cam['theta_harmonic_rad']:.2g} rad ("
+            + ("uncalibrated; a summary measured with 'abu measure --camera' gives the "
+               "calibration's" if uncalibrated else "from the summaries")
+            + f"), {kin}")
 
 
 def _write_design(args, payload: dict, design, check, name: str) -> None:
