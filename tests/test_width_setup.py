@@ -145,3 +145,17 @@ def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
                      *option]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and option[0] in err[0], err
+
+
+def test_abu_measure_says_what_an_uncalibrated_lens_takes():
+    """``abu measure``'s text: without a camera file the lens prior's share at the slip and
+    how to replace it; none with a calibration, or where the drive model fitted theta's
+    harmonics (the profile drive: no prior then)."""
+    from measurement.report.summary_text import lens_line
+    base = {"estimator": {"name": "savgol"}, "model_fit": {"kinematic_rel_bias_at_slip": 0.017}}
+    line = lens_line(base)
+    assert "+-1.7 % of mu" in line and "--camera" in line and "calibrate-camera" in line
+    assert lens_line({**base, "camera": {"file": "cam.json"}}) == ""
+    assert lens_line({**base, "estimator": {"name": "drive-model",
+                                            "theta_harmonics_fitted": True}}) == ""
+    assert lens_line({"estimator": {}, "model_fit": {"kinematic_rel_bias_at_slip": None}}) == ""

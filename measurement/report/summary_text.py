@@ -33,9 +33,9 @@ def describe_measurement(s: dict) -> str:
                     " (the running max's, no coverage guarantee)"))
     if s.get("relative_width") is not None:
         lines.append(f"  relative width {100 * s['relative_width']:.1f} % (report, one run: 8.7 %)")
-    kin = _kinematics_line(s.get("estimator") or {})
-    if kin:
-        lines.append(kin)
+    for extra in (_kinematics_line(s.get("estimator") or {}), lens_line(s)):
+        if extra:
+            lines.append(extra)
     ea = s["error_analysis"]
     lines.append(f"  report's worst case ({100 * ea['e_omega']:g} % on omega, "
                  f"{100 * ea['e_omega_dot']:g} % on omega_dot): {100 * ea['e_mu_min']:+.1f} % / "
@@ -68,6 +68,21 @@ def _kinematics_line(est: dict) -> str:
     if est.get("model") == "refused":
         return f"  kinematics: drive model refused ({est.get('why')}); Savitzky-Golay used"
     return ""
+
+
+def lens_line(s: dict) -> str:
+    """Without a calibrated camera, what the lens prior (with the truncation bound) takes
+    at the slip, and how to replace it: designed runs measured with a calibration were 1.5x
+    narrower (benchmarks/bench_designed_runs.py --camera 30, docs/design.md)."""
+    est, mf = s.get("estimator") or {}, s.get("model_fit") or {}
+    bias = mf.get("kinematic_rel_bias_at_slip")
+    if s.get("camera") or est.get("theta_harmonics_fitted") or not isinstance(
+            bias, (int, float)) or not bias > 0:
+        return ""
+    return (f"  lens: uncalibrated; its prior bound on theta's harmonic (with the truncation "
+            f"bound) takes +-{100 * bias:.1f} % of mu at the slip; a chessboard calibration "
+            "(abu calibrate-camera, then --camera camera.json) replaces it by the "
+            "calibration's own")
 
 
 def describe_combined(r: dict) -> str:
