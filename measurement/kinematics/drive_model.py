@@ -39,7 +39,8 @@ from controller.drive import UPPER, Drive
 
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import (STEP_BIN_S, STEP_WINDOW_S, DriveFit,
-                                              DriveModelSettings, fit_model, linear_basis)
+                                              DriveModelSettings, fit_model, linear_basis,
+                                              solve)
 
 #: loop parameters: (file name, Drive attribute, lower bound)
 LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
@@ -191,26 +192,14 @@ def quick_fit(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setp
     sample times of a loop fitted with another one
     (:mod:`measurement.kinematics.sample_time_search`): refitting the loop matters, as a loop
     fitted with one sample time has absorbed part of its step timing."""
-    from scipy.optimize import least_squares
-
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
     model = _Model(t, drive, setpoints, settings, t_off_s)
-    basis = linear_basis(t, th, settings.harmonics)
-    proj = np.linalg.pinv(basis)
-
-    def residuals(p: np.ndarray) -> np.ndarray:
-        e = th - model.evaluate(p)[0]
-        return e - basis @ (proj @ e)
-
-    lo, hi = np.array(model.lo), np.array(model.hi)
-    x0 = np.clip(np.array(model.x0, float), lo + 1e-9, hi - 1e-9)
     with np.errstate(over="ignore", invalid="ignore"):
         try:
-            sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
-                                max_nfev=max_evaluations)
+            sol, _, _ = solve(t, th, model, 1.0, settings, max_evaluations)
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
             return math.inf, {}
-        cost = 2.0 * float(sol.cost) / t.size
+        cost = float(np.mean(sol.fun[:t.size] ** 2))
     return (cost if math.isfinite(cost) else math.inf), dict(zip(model.names,
                                                                   sol.x.tolist()))

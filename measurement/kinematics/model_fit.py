@@ -167,11 +167,14 @@ def fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
     return fit
 
 
-def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
-               st: DriveModelSettings) -> DriveFit:
+def solve(t: np.ndarray, th: np.ndarray, model: Any, sigma: float, st: DriveModelSettings,
+          max_evaluations: int) -> tuple[Any, np.ndarray, np.ndarray]:
+    """The least-squares solution of the model's nonlinear parameters with the linear
+    nuisance terms projected out: (SciPy's result, whose ``fun`` starts with the residuals
+    [in sigma], the basis, its pseudo-inverse). Raises what least_squares raises on a
+    failed fit (ValueError, FloatingPointError, LinAlgError)."""
     from scipy.optimize import least_squares
 
-    dt = sample_interval(t)
     # linear nuisance terms: theta0, a speed offset c t, and harmonics 1..3 of theta itself
     # (a camera's lens and the eccentric axis put a fixed pattern on the tracked angle)
     basis = linear_basis(t, th, st.harmonics)
@@ -187,9 +190,16 @@ def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
 
     lo, hi = np.array(model.lo), np.array(model.hi)
     x0 = np.clip(np.array(model.x0, float), lo + 1e-9, hi - 1e-9)
+    sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
+                        max_nfev=max_evaluations)
+    return sol, basis, proj
+
+
+def _fit_model(t: np.ndarray, th: np.ndarray, model: Any, sigma: float,
+               st: DriveModelSettings) -> DriveFit:
+    dt = sample_interval(t)
     try:
-        sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
-                            max_nfev=st.max_evaluations)
+        sol, basis, proj = solve(t, th, model, sigma, st, st.max_evaluations)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return DriveFit(False, f"the fit failed: {exc}")
     p = sol.x

@@ -96,8 +96,8 @@ def find_sample_time(inp, time: np.ndarray, theta: np.ndarray,
                      sigma_theta: float | None) -> DriveFit:
     """The best full fit over the candidate sample times (module doc). ``inp``: an
     :class:`measurement.kinematics.unknown_loop.UnknownLoopInput` over a staircase; its
-    ``fit_with(period, ...)`` (the scored starts) and ``fit_from(period, drive, t_off_s,
-    ...)`` (one warm start) fit the loop."""
+    ``fit_with(period, ...)`` (the scored starts) and ``fit_from(drive, t_off_s, ...)`` (one
+    warm start, the drive's own sample time) fit the loop."""
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
     cands = candidates(sample_interval(t), inp.setpoints)
@@ -112,7 +112,7 @@ def find_sample_time(inp, time: np.ndarray, theta: np.ndarray,
         ranked = sorted(cands, key=lambda p: quick[p][0])
         for p in ranked[:N_REFITS]:
             if p not in fits and quick[p][1]:
-                fits[p] = inp.fit_from(p, loop_drive(quick[p][1], p), quick[p][1]["t_off_s"],
+                fits[p] = inp.fit_from(loop_drive(quick[p][1], p), quick[p][1]["t_off_s"],
                                        t, th, sigma_theta)
     best_p, best = min(fits.items(), key=lambda kv: (
         not kv[1].accepted, kv[1].rms_ratio if math.isfinite(kv[1].rms_ratio) else math.inf))

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -187,25 +187,23 @@ class UnknownLoopInput:
                             "needs its sample time stated, or found: leave it out)")
         return out
 
-    def fit_from(self, period: float | None, drive: Drive, t_off_s: float, time: np.ndarray,
-                 theta: np.ndarray, sigma_theta: float | None) -> DriveFit:
-        """One free fit of a staircase's loop from ``drive`` and the time offset ``t_off_s``
-        [s] (a warm start), the controller's sample time ``period`` [s]."""
-        assert self.setpoints is not None
-        out = fit_drive_model(time, theta, replace(drive, sample_time=period), self.setpoints,
-                              sigma_theta=sigma_theta, settings=self.settings, t_off_s=t_off_s)
+    def fit_from(self, drive: Drive, t_off_s: float, time: np.ndarray, theta: np.ndarray,
+                 sigma_theta: float | None) -> DriveFit:
+        """One free fit of a staircase's loop from ``drive`` (its controller sample time
+        included) and the time offset ``t_off_s`` [s]: a warm start."""
+        out = self._fit_one(time, theta, sigma_theta, drive, t_off_s)
         out.params = {**out.params, "loop_starts_tried": 1.0}
         if not out.accepted:
             out.why = f"the loop fitted freely from a warm start: {out.why}"
         return out
 
     def _fit_one(self, time: np.ndarray, theta: np.ndarray, sigma_theta: float | None,
-                 drive: Drive) -> DriveFit:
+                 drive: Drive, t_off_s: float = 0.0) -> DriveFit:
         if self.profile is not None:
             return fit_profile_model(time, theta, drive, self.profile, sigma_theta=sigma_theta,
                                      settings=self.settings)
         return fit_drive_model(time, theta, drive, self.setpoints, sigma_theta=sigma_theta,
-                               settings=self.settings)
+                               settings=self.settings, t_off_s=t_off_s)
 
 
 __all__ = ["UnknownLoopInput", "FIND", "STAIRCASE_GRID", "N_STARTS", "PROFILE_STARTS",
