@@ -86,6 +86,9 @@ def test_drive_model_kinematics_have_the_fits_floor_and_timing_bar():
     {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": True}}},
     {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": -1e-4}}},
     {"noise": [1, 2]}, {"model_fit": {"noise_model": {"sigma_white_rad": "5e-4"}}},
+    {"camera": {"theta_harmonic_prior": {"theta_harmonic_rad": 5.0}}},    # no lens's
+    {"noise": {"sigma_theta_rad": 1e3}},                                    # no camera's
+    {"model_fit": {"noise_model": {"sigma_white_rad": float("inf")}}},
 ])
 def test_what_a_summary_cannot_say_leaves_the_constants(bad):
     s = {"kind": "abu-measure-summary", "estimator": {"name": "savgol"}, **bad}

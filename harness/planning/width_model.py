@@ -105,12 +105,18 @@ CALIBRATED = WidthConstants(k_emerge=0.0556, sigma_beta_rad=6.52e-4, sigma_theta
                             z_low=2.80, range_log_low=-0.273, range_log_high=0.192)
 
 
+#: Angles a summary may state as noise or lens prior are below this [rad]: tracking noise and
+#: a lens harmonic are ~1e-4 rad; 0.1 rad is no camera's (a figure above is left out).
+MAX_STATED_ANGLE_RAD = 0.1
+
+
 def _numbers(values: list, low: float, low_ok: bool) -> list[float]:
-    """The finite numbers of ``values`` above ``low`` (or at it, ``low_ok``): what a summary
-    states, anything else (missing, text, booleans, NaN) left out."""
+    """The finite numbers of ``values`` above ``low`` (or at it, ``low_ok``) and below
+    :data:`MAX_STATED_ANGLE_RAD`: what a summary states, anything else (missing, text,
+    booleans, NaN, no camera's angle) left out."""
     return [float(x) for x in values
             if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-            and (x > low or (low_ok and x == low))]
+            and (x > low or (low_ok and x == low)) and x < MAX_STATED_ANGLE_RAD]
 
 
 def _field(obj: object, *keys: str) -> object:
