@@ -102,6 +102,30 @@ def test_what_a_summary_cannot_say_leaves_the_constants(bad):
         wm.WidthConstants(theta_harmonic_rad=-1.0)
 
 
+def test_where_the_set_up_came_from_is_recorded_not_guessed(tmp_path, capsys):
+    """A summary that states exactly the typical noise, measured without a camera, still reads
+    as the user's own noise and an uncalibrated lens (the source is recorded by
+    ``with_recorded_setup``, not derived by comparing values)."""
+    typical = {"kind": "abu-measure-summary", "estimator": {"name": "savgol"},
+               "noise": {"sigma_theta_rad": wm.CALIBRATED.sigma_theta_rad},
+               "model_fit": {"noise_model": {"sigma_white_rad": wm.CALIBRATED.sigma_beta_rad,
+                                            "sigma_leftover_rad": 0.0}}}
+    c = wm.with_recorded_setup(wm.CALIBRATED, [typical])
+    assert (c.sigma_theta_rad, c.sigma_beta_rad) == (wm.CALIBRATED.sigma_theta_rad,
+                                                     wm.CALIBRATED.sigma_beta_rad)
+    assert (c.noise_source, c.lens_source) == ("summaries", "typical")
+    assert wm.with_recorded_setup(wm.CALIBRATED, [_summary(3e-4)]).lens_source == "summaries"
+    assert wm.with_recorded_setup(wm.CALIBRATED, [{"kind": "x"}]).noise_source == "typical"
+    path = tmp_path / "typical.json"
+    path.write_text(json.dumps(typical))
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check", "--noise-from",
+                 str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "(from the summaries), lens prior 0.0008 rad (uncalibrated" in text, text
+    with pytest.raises(ParameterError, match="noise_source"):
+        wm.WidthConstants(noise_source="guessed")
+
+
 def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
     """``abu design --noise-from`` and ``abu next`` on summaries measured with a calibrated
     camera and the drive model predict with their lens prior and kinematics; ``--kinematics``

@@ -237,11 +237,9 @@ def _describe_width(design) -> list[str]:
 
 def _assumed(w: dict) -> str:
     """The set-up the prediction assumed, and how to state yours."""
-    from harness.planning.width_model import CALIBRATED
     cam = w["camera_noise"]
-    typical = (cam["sigma_theta_rad"] == CALIBRATED.sigma_theta_rad
-               and cam["sigma_beta_rad"] == CALIBRATED.sigma_beta_rad)
-    uncalibrated = cam["theta_harmonic_rad"] == CALIBRATED.theta_harmonic_rad
+    typical = cam["noise_source"] == "typical"
+    uncalibrated = cam["lens_source"] == "typical"
     kin = {"savgol": "Savitzky-Golay kinematics (abu measure's default)",
            "drive-model": "drive-model kinematics"}[w["kinematics"]]
     return (f"  assumed: theta noise {cam['sigma_theta_rad']:.3g} rad, beta noise "

@@ -84,7 +84,7 @@ class DesignSpec:
         te_grid: candidate durations of the inclined sine [s].
         max_span_steps: largest staircase span in steps.
         width: the width model's constants (:mod:`.width_model`; the camera's noise, e.g.
-            from earlier recordings with :func:`.width_model.with_camera_noise`).
+            from earlier recordings with :func:`.width_model.with_recorded_setup`).
         objective: ``predicted`` (the default: mean width ``abu measure`` is predicted to
             report, :mod:`.width_model`), ``expected`` (mean noise-free relative width over a
             log-uniform prior on the range) or ``worst`` (its largest over the range).

@@ -51,6 +51,8 @@ Z95 = 1.959964
 DRIVE_MODEL_ERROR_REL = 0.01
 #: the kinematics ``abu measure`` can use (``--kinematics``)
 KINEMATICS = ("savgol", "drive-model")
+#: where the constants' camera noise and lens prior came from (``with_recorded_setup``)
+SOURCES = ("typical", "summaries")
 #: mu_d / mu spanned by the range (the measurement's profile; the twin's family draws 0.6-1)
 MU_D_RATIOS = (0.6, 0.8, 1.0)
 
@@ -76,6 +78,8 @@ class WidthConstants:
         kinematics: the kinematics of the measurement predicted: ``"savgol"`` (the default
             estimator) or ``"drive-model"`` (the module doc).
         drive_model_error_rel: the drive model's discrepancy floor on omega_dot [1].
+        noise_source, lens_source: where the camera noise and the lens prior came from:
+            ``"typical"`` (these constants) or ``"summaries"`` (:func:`with_recorded_setup`).
     """
 
     k_emerge: float = 3.0
@@ -90,10 +94,15 @@ class WidthConstants:
     horizon_s: float = 0.2
     kinematics: str = "savgol"
     drive_model_error_rel: float = DRIVE_MODEL_ERROR_REL
+    noise_source: str = "typical"
+    lens_source: str = "typical"
 
     def __post_init__(self) -> None:
         if self.kinematics not in KINEMATICS:
             raise ParameterError("kinematics", self.kinematics, " or ".join(KINEMATICS))
+        for name in ("noise_source", "lens_source"):
+            if getattr(self, name) not in SOURCES:
+                raise ParameterError(name, getattr(self, name), " or ".join(SOURCES))
         if not (math.isfinite(self.theta_harmonic_rad) and self.theta_harmonic_rad >= 0):
             raise ParameterError("theta_harmonic_rad", self.theta_harmonic_rad,
                                  "a lens prior >= 0 rad")
@@ -139,7 +148,7 @@ def with_recorded_setup(constants: WidthConstants, summaries: list[dict]) -> Wid
     * the kinematics: ``"drive-model"`` where most summaries were measured with the drive
       model's kinematics accepted (``estimator.name``), else the default's.
     """
-    th, be, lens, kin = [], [], [], []
+    th, be, lens, kin, calibrated = [], [], [], [], []
     for s in summaries:
         th.append(_field(s, "noise", "sigma_theta_rad"))
         white = _numbers([_field(s, "model_fit", "noise_model", "sigma_white_rad")], 0.0, True)
@@ -149,11 +158,15 @@ def with_recorded_setup(constants: WidthConstants, summaries: list[dict]) -> Wid
         if isinstance(s.get("estimator"), dict):   # the measurement's own record of its set-up
             prior = _field(s, "camera", "theta_harmonic_prior", "theta_harmonic_rad")
             lens.append(THETA_HARMONIC_RAD if prior is None else prior)
+            calibrated += _numbers([prior], 0.0, True)
             kin.append(s["estimator"].get("name") == "drive-model")
     th, be = _numbers(th, 0.0, False), _numbers(be, 0.0, False)
     lens = _numbers(lens, 0.0, True)
     return replace(
         constants,
+        noise_source="summaries" if th or be else constants.noise_source,
+        # a summary measured without a camera states the uncalibrated prior: still "typical"
+        lens_source="summaries" if calibrated else constants.lens_source,
         sigma_theta_rad=float(np.median(th)) if th else constants.sigma_theta_rad,
         sigma_beta_rad=float(np.median(be)) if be else constants.sigma_beta_rad,
         theta_harmonic_rad=float(np.median(lens)) if lens else constants.theta_harmonic_rad,
