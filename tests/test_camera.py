@@ -249,6 +249,34 @@ def test_measure_with_the_camera_is_narrower_and_holds_mu(rendered, tmp_path, ca
     assert s2["mu_high"] == pytest.approx(s["camera"]["mu_high"], rel=1e-9)
 
 
+def test_design_predicts_the_prior_abu_measure_states(rendered, tmp_path, capsys):
+    """``abu design --camera`` before a recording, ``abu measure --camera`` after it: at the
+    recording's CD circle the design's lens prior is the one the measurement states, and the
+    default circle (the image centre, 0.37 of the side) gives it within a factor 1.5 on the
+    twin's recordings (framed like the report's)."""
+    for rec in rendered:
+        cam = tmp_path / f"{rec.name}.json"
+        assert main(["calibrate-camera", str(rec / "calibration"), "--out", str(cam)]) == 0
+        out = tmp_path / f"{rec.name}_m"
+        assert main(["measure", str(rec), "--out", str(out), "--no-plots", "--quiet",
+                     "--camera", str(cam)]) == 0
+        c = json.loads((out / "summary.json").read_text())["camera"]
+        measured = c["theta_harmonic_prior"]["theta_harmonic_rad"]
+        circle = ",".join(repr(v) for v in (*c["axis_px"], c["r_cd_px"]))
+        base = ["design", "--mu-range", "0.02", "0.04", "--no-check", "--json", "--camera",
+                str(cam)]
+        capsys.readouterr()
+        assert main([*base, "--cd-circle", circle]) == 0
+        at = json.loads(capsys.readouterr().out)["width_prediction"]["camera_noise"]
+        assert at["theta_harmonic_rad"] == pytest.approx(measured, rel=1e-9)
+        assert main(base) == 0
+        default = json.loads(capsys.readouterr().out)["width_prediction"]["camera_noise"]
+        with capsys.disabled():
+            print(f"{rec.name}: prior stated by abu measure {measured:.3e} rad (circle "
+                  f"{circle}); abu design's default circle {default['theta_harmonic_rad']:.3e}")
+        assert 1 / 1.5 < default["theta_harmonic_rad"] / measured < 1.5
+
+
 def test_camera_of_another_frame_size_is_refused(rendered, tmp_path, capsys):
     rec = rendered[0]
     cam = cam_mod.Camera(np.array([[181.0, 0, 128], [0, 181.0, 127], [0, 0, 1]]),

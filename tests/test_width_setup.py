@@ -126,6 +126,64 @@ def test_where_the_set_up_came_from_is_recorded_not_guessed(tmp_path, capsys):
         wm.WidthConstants(noise_source="guessed")
 
 
+def _camera_file(tmp_path, cov_scale: float = 1.0):
+    from measurement.imaging import camera as cam_mod
+    cam = cam_mod.Camera(np.array([[300.0, 0, 128.0], [0, 300.0, 127.0], [0, 0, 1]]),
+                         np.array([-0.05, 0.01, 0, 0, 0]), (256, 256), 0.03, 30, 1620,
+                         np.diag([0.04, 0.04, 1e-6, 1e-6]) * cov_scale)
+    path = tmp_path / f"camera{cov_scale:g}.json"
+    cam_mod.write_camera(path, cam)
+    return path, cam
+
+
+def test_design_takes_a_calibrated_cameras_lens_prior(tmp_path, capsys):
+    """``abu design --camera`` predicts with the calibration's prior at the CD circle (the
+    function ``abu measure --camera`` states it with), exactly and scaled with the
+    calibration's covariance; the circle's default is stated; bad circles, a circle without a
+    camera and a missing camera file are refused by name (exit 2, one line)."""
+    from measurement.imaging.camera import theta_harmonic_prior
+
+    path, cam = _camera_file(tmp_path)
+    base = ["design", "--mu-range", "0.02", "0.04", "--no-check"]
+    assert main([*base, "--json", "--camera", str(path), "--cd-circle", "120,130,90"]) == 0
+    w = json.loads(capsys.readouterr().out)["width_prediction"]
+    prior = theta_harmonic_prior(cam, (120.0, 130.0), 90.0)["theta_harmonic_rad"]
+    assert 0 < prior < wm.THETA_HARMONIC_RAD
+    assert w["camera_noise"]["theta_harmonic_rad"] == pytest.approx(prior, rel=1e-12)
+    assert w["camera_noise"]["lens_source"] == "camera"
+    for row in w["table"]:
+        assert row["lens"] == pytest.approx(prior * (LEVER / row["mu"] + 2), rel=0.25)
+    # four times the covariance: twice the prior (the bound is linear in the parameters' sd)
+    path4, _ = _camera_file(tmp_path, 4.0)
+    assert main([*base, "--json", "--camera", str(path4), "--cd-circle", "120,130,90"]) == 0
+    w4 = json.loads(capsys.readouterr().out)["width_prediction"]
+    # (to the finite-difference Jacobian's step, one sd: 0.2 %)
+    assert w4["camera_noise"]["theta_harmonic_rad"] == pytest.approx(2 * prior, rel=0.01)
+    assert main([*base, "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)["width_prediction"]
+    assert w["expected"] < w4["expected"] < plain["expected"]
+    assert main([*base, "--camera", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "assumed to circle the image centre at 95 px" in text and "--cd-circle" in text
+    for bad in ("1,2", "a,b,c", "128,128,nan", "128,128,0", "128,128,200", "-5,128,20"):
+        assert main([*base, "--camera", str(path), f"--cd-circle={bad}"]) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--cd-circle" in err[0] and "256x256" in err[0], err
+    assert main([*base, "--cd-circle", "128,128,90"]) == 2
+    assert "--cd-circle" in capsys.readouterr().err
+    # abu next: the camera's prior replaces that of the summaries it combines
+    summary = tmp_path / "s.json"
+    summary.write_text(json.dumps(_summary(6e-4)))
+    assert main(["next", str(summary), "--no-check", "--json", "--camera", str(path),
+                 "--cd-circle", "120,130,90"]) == 0
+    cn = json.loads(capsys.readouterr().out)["design"]["width_prediction"]["camera_noise"]
+    assert cn["lens_source"] == "camera"
+    assert cn["theta_harmonic_rad"] == pytest.approx(prior, rel=1e-12)
+    assert main([*base, "--camera", str(tmp_path / "missing.json")]) == 2
+    err = capsys.readouterr().err
+    assert "missing.json" in err and "Traceback" not in err
+
+
 def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
     """``abu design --noise-from`` and ``abu next`` on summaries measured with a calibrated
     camera and the drive model predict with their lens prior and kinematics; ``--kinematics``
@@ -167,7 +225,8 @@ def test_design_and_next_use_the_recorded_set_up(tmp_path, capsys):
     tracking.write_text(json.dumps({"kind": "abu-drive", "format_version": 1,
                                     "model": "tracking", "bandwidth_rad_s": 100.0,
                                     "tau_motor_s": 0.002}))
-    for option in (["--kinematics", "drive-model"], ["--noise-from", paths[0]]):
+    for option in (["--kinematics", "drive-model"], ["--noise-from", paths[0]],
+                   ["--camera", paths[0]], ["--cd-circle", "1,1,1"]):
         assert main(["design", "--mu-range", "0.02", "0.04", "--drive", str(tracking),
                      *option]) == 2
         err = capsys.readouterr().err.strip().splitlines()

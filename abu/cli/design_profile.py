@@ -26,7 +26,7 @@ SPEED_MAX_HZ = 40.0
 #: staircase-only options of ``abu design``, refused with a tracking drive (the profile's
 #: width predictor assumes the drive-model kinematics and its own calibrated noise)
 STAIRCASE_ONLY = ("--step-hz", "--slip-window-s", "--objective", "--fmu-dir", "--noise-from",
-                  "--kinematics")
+                  "--kinematics", "--camera", "--cd-circle")
 
 
 def profile_spec(args: argparse.Namespace, drive):

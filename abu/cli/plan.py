@@ -239,7 +239,6 @@ def _assumed(w: dict) -> str:
     """The set-up the prediction assumed, and how to state yours."""
     cam = w["camera_noise"]
     typical = cam["noise_source"] == "typical"
-    uncalibrated = cam["lens_source"] == "typical"
     kin = {"savgol": "Savitzky-Golay kinematics (abu measure's default)",
            "drive-model": "drive-model kinematics"}[w["kinematics"]]
     return (f"  assumed: theta noise {cam['sigma_theta_rad']:.3g} rad, beta noise "
@@ -247,8 +246,10 @@ def _assumed(w: dict) -> str:
             + ("a typical camera; yours: --noise-from SUMMARY.json ..." if typical
                else "from the summaries")
             + f"), lens prior {cam['theta_harmonic_rad']:.2g} rad ("
-            + ("uncalibrated; a summary measured with 'abu measure --camera' gives the "
-               "calibration's" if uncalibrated else "from the summaries")
+            + {"typical": "uncalibrated; --camera CAMERA.json, or a summary measured with "
+                          "'abu measure --camera', gives the calibration's",
+               "summaries": "from the summaries",
+               "camera": cam["lens_note"]}[cam["lens_source"]]
             + f"), {kin}")
 
 

@@ -52,7 +52,7 @@ DRIVE_MODEL_ERROR_REL = 0.01
 #: the kinematics ``abu measure`` can use (``--kinematics``)
 KINEMATICS = ("savgol", "drive-model")
 #: where the constants' camera noise and lens prior came from (``with_recorded_setup``)
-SOURCES = ("typical", "summaries")
+SOURCES = ("typical", "summaries", "camera")
 #: mu_d / mu spanned by the range (the measurement's profile; the twin's family draws 0.6-1)
 MU_D_RATIOS = (0.6, 0.8, 1.0)
 
@@ -79,7 +79,9 @@ class WidthConstants:
             estimator) or ``"drive-model"`` (the module doc).
         drive_model_error_rel: the drive model's discrepancy floor on omega_dot [1].
         noise_source, lens_source: where the camera noise and the lens prior came from:
-            ``"typical"`` (these constants) or ``"summaries"`` (:func:`with_recorded_setup`).
+            ``"typical"`` (these constants), ``"summaries"`` (:func:`with_recorded_setup`) or,
+            for the lens, ``"camera"`` (a calibration file's prior, ``abu design --camera``).
+        lens_note: how the lens prior was obtained, for the record ("" for the others).
     """
 
     k_emerge: float = 3.0
@@ -96,6 +98,7 @@ class WidthConstants:
     drive_model_error_rel: float = DRIVE_MODEL_ERROR_REL
     noise_source: str = "typical"
     lens_source: str = "typical"
+    lens_note: str = ""
 
     def __post_init__(self) -> None:
         if self.kinematics not in KINEMATICS:
