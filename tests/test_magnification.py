@@ -103,3 +103,34 @@ def test_a_far_cameras_small_ball_is_found_next_to_the_centre_marker(seed):
     seeds, _ = find_markers(frame)
     truth = np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])
     assert np.hypot(*(seeds - truth).T).max() < 1.0, seeds - truth
+
+
+def test_paper_markers_near_the_finders_threshold_are_found_whole():
+    """Seed 5001 at 2x: the paper markers' contrast (51-53) sits at a quarter of the saturated
+    ball's (203), the finder's first threshold, so the centre marker crosses it in two
+    fragments and the CD marker not at all; the finder refused ("cannot tell which marker is
+    the ABU centre"). Looked at again at a tenth, the candidates are the three markers, each
+    within 1 px of its true centre; a frame the first look reads is not looked at again."""
+    from measurement.imaging import markers
+
+    scn = magnified(random_scenario(5001, size=512, n_frames=1000), 2.0).with_(n_frames=2)
+    state, pos = simulate_scenario(scn)
+    frame = render_scenario_frames(scn, state, pos)[0]
+    truth = np.stack([pos["centre"][0], pos["cd"][0], pos["ball"][0]])
+    first = markers.bright_candidates(frame)
+    assert len(first) == 3 and min(b["area"] for b in first) < 20   # fragments
+    with pytest.raises(markers.MarkerError, match="--seeds"):   # the first look alone
+        markers._roles(frame, first, False, None, 30)
+    seeds, roles = markers.find_markers(frame)
+    assert roles == ["centre", "cd", "ball"]
+    assert np.hypot(*(seeds - truth).T).max() < 1.0, seeds - truth
+    plain = magnified(random_scenario(5000, size=512, n_frames=1000), 2.0).with_(n_frames=2)
+    state, pos = simulate_scenario(plain)
+    frame = render_scenario_frames(plain, state, pos)[0]
+    looks = []
+    real = markers.bright_candidates
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(markers, "bright_candidates",
+                   lambda *a, **k: looks.append(k["fraction"]) or real(*a, **k))
+        assert markers.find_markers(frame)[1] == ["centre", "cd", "ball"]
+    assert looks == [0.25]
