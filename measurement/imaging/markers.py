@@ -281,8 +281,8 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
     """
     img = np.asarray(frame)
 
-    def candidates(fraction: float) -> list[dict]:
-        return bright_candidates(img, dark=dark, r_min=r_min, r_max=r_max,
+    def candidates(fraction: float, largest: float = r_max) -> list[dict]:
+        return bright_candidates(img, dark=dark, r_min=r_min, r_max=largest,
                                  ball_reflections=ball_reflections, fraction=fraction)
 
     blobs = candidates(0.25)
@@ -303,19 +303,21 @@ def find_markers(frame: np.ndarray, dark: bool = False, *, geometry=None, window
     try:
         return _roles(img, blobs, dark, geometry, window)
     except MarkerError:
-        # Paper markers whose contrast is near a quarter of a saturated ball's cross that
-        # threshold only at their brightest pixels: in fragments, or not at all (rendered seed
-        # 5001 at twice our magnification: the centre marker in two or more pieces, the CD
-        # marker a sliver at its edge or missing; none of them then a disk of its size). The
-        # whole disks stand above a tenth: look there, and take it if it makes three markers
-        # whose roles the rule decides.
-        again = candidates(0.1)
-        if len(again) != 3:
-            raise
-        try:
-            return _roles(img, again, dark, geometry, window)
-        except MarkerError:
-            pass
+        # Where the first look does not decide, look again, and take the first look that makes
+        # three markers whose roles the rule decides:
+        # * at a tenth: paper markers whose contrast is near a quarter of a saturated ball's
+        #   cross that threshold only at their brightest pixels, in fragments, or not at all
+        #   (rendered seed 5001 at twice our magnification: the centre marker in two pieces,
+        #   the CD marker missing); their whole disks stand above a tenth;
+        # * with markers up to twice r_max: a camera twice as close makes the largest centre
+        #   markers 14 px in radius (seeds 5096, 6033 at 2x: 685 px^2, above r_max's bound).
+        for fraction, largest in ((0.1, r_max), (0.25, 2 * r_max), (0.1, 2 * r_max)):
+            again = candidates(fraction, largest)
+            if len(again) == 3:
+                try:
+                    return _roles(img, again, dark, geometry, window)
+                except MarkerError:
+                    pass
         raise
 
 
