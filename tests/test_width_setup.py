@@ -245,3 +245,66 @@ def test_abu_measure_says_what_an_uncalibrated_lens_takes():
     assert lens_line({**base, "estimator": {"name": "drive-model",
                                             "theta_harmonics_fitted": True}}) == ""
     assert lens_line({"estimator": {}, "model_fit": {"kinematic_rel_bias_at_slip": None}}) == ""
+
+
+def test_design_says_what_would_narrow_it(tmp_path, capsys):
+    """``what_if``: each listed set-up change narrows this staircase's predicted width, all of
+    them together more than any one; a change already made is not offered; the calibrated
+    camera's what-if is what a design told that lens predicts (it may pick another staircase
+    of the same ranking: within 3 %); stating the staircase (drive-model kinematics) is
+    offered only where a design told those kinematics predicts narrower (on the report's loop
+    and a PI loop with a 5 ms lag it predicts wider: the timing bar at the steps)."""
+    from harness.planning.design_width import CALIBRATED_LENS_PRIOR_RAD
+
+    base = ["design", "--mu-range", "0.02", "0.04", "--no-check", "--json"]
+    pi = tmp_path / "pi.json"
+    pi.write_text(json.dumps({"kind": "abu-drive", "format_version": 1, "model": "pi-lag",
+                              "zeta": 0.7, "omega_n_rad_s": 12.0, "tau_motor_s": 0.005}))
+    # a summary stating the typical noise and a calibration's lens prior
+    calibrated = tmp_path / "calibrated.json"
+    calibrated.write_text(json.dumps(
+        {"kind": "abu-measure-summary", "estimator": {"name": "savgol"},
+         "noise": {"sigma_theta_rad": wm.CALIBRATED.sigma_theta_rad},
+         "model_fit": {"noise_model": {"sigma_white_rad": wm.CALIBRATED.sigma_beta_rad,
+                                      "sigma_leftover_rad": 0.0}},
+         "camera": {"theta_harmonic_prior": {"theta_harmonic_rad": CALIBRATED_LENS_PRIOR_RAD}}}))
+    for drive in ([], ["--drive", str(pi)]):
+        assert main([*base, *drive]) == 0
+        d = json.loads(capsys.readouterr().out)
+        now, changes = d["width_prediction"]["expected"], d["what_if"]
+        names = [c["change"] for c in changes]
+        assert any("calibrated camera" in n for n in names)
+        assert any("twice as close" in n for n in names)
+        # offered only where it narrows: a design told the drive-model kinematics says so
+        assert main([*base, *drive, "--kinematics", "drive-model"]) == 0
+        dm = json.loads(capsys.readouterr().out)["width_prediction"]["expected"]
+        assert abs(dm / now - 1) > 0.03   # (not a tie the re-ranking could flip)
+        assert any("drive-model" in n for n in names) == (dm < now), (names, dm, now)
+        assert all(c["expected"] < now for c in changes)
+        assert names[-1] == "all of these"
+        assert changes[-1]["expected"] <= min(c["expected"] for c in changes[:-1])
+        assert main([*base, *drive, "--noise-from", str(calibrated)]) == 0
+        told = json.loads(capsys.readouterr().out)
+        cal = next(c for c in changes if "calibrated camera" in c["change"])
+        assert told["width_prediction"]["expected"] == pytest.approx(cal["expected"], rel=0.03)
+        assert not any("calibrated camera" in c["change"] for c in told["what_if"])
+    assert main([*base, "--drive", str(pi), "--kinematics", "drive-model"]) == 0
+    assert not any("drive-model" in c["change"]
+                   for c in json.loads(capsys.readouterr().out)["what_if"])
+    # a camera with ten times the typical theta noise: the Savitzky-Golay kinematics dominate,
+    # and stating the staircase narrows it (as a design told it predicts)
+    noisy = tmp_path / "noisy.json"
+    noisy.write_text(json.dumps(_summary(noise={"sigma_theta_rad": 2e-3})))
+    assert main([*base, "--drive", str(pi), "--noise-from", str(noisy)]) == 0
+    d = json.loads(capsys.readouterr().out)
+    offered = [c for c in d["what_if"] if "drive-model" in c["change"]]
+    assert main([*base, "--drive", str(pi), "--noise-from", str(noisy), "--kinematics",
+                 "drive-model"]) == 0
+    dm = json.loads(capsys.readouterr().out)["width_prediction"]["expected"]
+    assert dm < 0.8 * d["width_prediction"]["expected"]
+    # a design told those kinematics may move the staircase too: at most the what-if's width
+    assert len(offered) == 1 and dm <= 1.03 * offered[0]["expected"]
+    assert offered[0]["expected"] < d["width_prediction"]["expected"]
+    assert main(["design", "--mu-range", "0.02", "0.04", "--no-check"]) == 0
+    text = capsys.readouterr().out
+    assert "what would narrow it (this staircase, predicted; now" in text

@@ -232,7 +232,13 @@ def _describe_width(design) -> list[str]:
                      f"{_pct(r['high90'])}; beta profile {_pct(r['profile'])}, lens prior "
                      f"+-{_pct(r['lens'])}, kinematic noise {_pct(r['kinematic_noise'])} "
                      "1 sigma)")
-    return lines + [_assumed(w)]
+    lines.append(_assumed(w))
+    changes = design.as_dict().get("what_if") or []
+    if changes:
+        lines.append(f"  what would narrow it (this staircase, predicted; now "
+                     f"{_pct(w['expected'])}):")
+        lines += [f"    {c['change']}: {_pct(c['expected'])}" for c in changes]
+    return lines
 
 
 def _assumed(w: dict) -> str:

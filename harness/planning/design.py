@@ -39,7 +39,8 @@ from abu_model.params import BallParams, check_finite
 from controller.drive import MODEL_PARAMETERS, Drive
 from controller.reference import ROUNDINGS, Staircase
 
-from harness.planning.design_width import predict_staircase, score as width_score, summary
+from harness.planning.design_width import predict_staircase, score as width_score, summary, \
+    what_ifs
 from harness.planning.width_model import CALIBRATED, WidthConstants
 from harness.planning.loop_response import as_setpoints, drive_response
 
@@ -157,6 +158,7 @@ class Design:
             mean (``expected``) or largest (``worst``) noise-free relative width
             (mu_high - mu_low) / mu over the log-spaced mu grid [-].
         width: the predicted ``abu measure`` width on the mu grid (:mod:`.width_model`).
+        what_if: the predicted width after set-up changes (:func:`.design_width.what_ifs`).
     """
 
     spec: DesignSpec
@@ -173,6 +175,7 @@ class Design:
     score: float
     ci_corners_hold: bool | None = None
     width: Any = None
+    what_if: list | None = None
 
     @property
     def staircase(self) -> Staircase:
@@ -238,6 +241,7 @@ class Design:
             "objective": s.objective, "expected_relative_width": self.expected_width,
             "worst_relative_width": self.worst_width,
             "width_prediction": None if self.width is None else summary(self.width, s.objective),
+            "what_if": self.what_if,
             "median_relative_width": float(np.median(self.relative_width)),
             "table": [{"mu": float(m), "t_slip_s": float(t), "mu_low": float(a),
                        "mu_high": float(b), "relative_width": float((b - a) / m)}
@@ -376,6 +380,7 @@ def _confirmed(spec: DesignSpec, best: list[tuple], mus: np.ndarray) -> list[Des
 def _with_width(design: Design) -> Design:
     """The design with its predicted ``abu measure`` width on its mu grid."""
     design.width = predict_staircase(design.spec, design.staircase, design.mu)
+    design.what_if = what_ifs(design.spec, design.staircase, design.mu)
     return design
 
 

@@ -35,6 +35,59 @@ def predict_staircase(spec: Any, staircase: Staircase, mus: np.ndarray) -> Width
                           controller_sample_time_s=spec.drive.sample_time)
 
 
+#: The lens prior a calibration states: median over the designed runs' 30-view calibrations
+#: (``bench_designed_runs.py --camera 30``: 2.6e-4 and 2.8e-4 rad on two slices of 72) [rad]
+CALIBRATED_LENS_PRIOR_RAD = 2.8e-4
+#: theta's and beta's noise [rad] of a camera twice as close, relative to the family's camera:
+#: ratios of the medians that ``abu measure`` stated on rendered designed runs
+#: (``bench_designed_runs.py --camera 30``, seeds 1000-1071 at 1x: theta 2.73e-4, beta
+#: 6.07e-4 rad; ``--zoom 2``, seeds 5000-5071: 1.11e-4, 3.37e-4). Tracking noise in px falls
+#: as 1 / sqrt(edge pixels) and the angle's as the path radius in px grows.
+CLOSER_THETA_NOISE_FACTOR = 0.41
+CLOSER_BETA_NOISE_FACTOR = 0.56
+
+
+def what_ifs(spec: Any, staircase: Staircase, mus: np.ndarray) -> list[dict[str, Any]]:
+    """The predicted width of this staircase after each set-up change that narrows it and
+    that rendered runs have checked: a calibrated lens (where the prior is the uncalibrated
+    one), a camera twice as close, the staircase stated to ``abu measure`` (drive-model
+    kinematics, where the prediction is for the default's), those that narrow it, and all of
+    those together. [{"change": what to do, "expected": mean predicted width over ``mus``
+    (None where a bound will be null), "constants": the changed width constants}]."""
+    from dataclasses import replace
+
+    c = spec.width
+    changes = []
+    if c.lens_source == "typical" and c.theta_harmonic_rad > CALIBRATED_LENS_PRIOR_RAD:
+        changes.append(("a calibrated camera (abu calibrate-camera, then abu measure --camera)",
+                        {"theta_harmonic_rad": CALIBRATED_LENS_PRIOR_RAD}))
+    changes.append(("a camera twice as close (pixel size / 2, the frame twice as wide; "
+                    f"theta's noise x {CLOSER_THETA_NOISE_FACTOR:g}, beta's x "
+                    f"{CLOSER_BETA_NOISE_FACTOR:g}, as rendered runs measured)",
+                    {"sigma_theta_rad": c.sigma_theta_rad * CLOSER_THETA_NOISE_FACTOR,
+                     "sigma_beta_rad": c.sigma_beta_rad * CLOSER_BETA_NOISE_FACTOR}))
+    if c.kinematics == "savgol":
+        changes.append(("the staircase stated to abu measure (--kinematics drive-model)",
+                        {"kinematics": "drive-model"}))
+
+    def predicted(change: dict) -> float:
+        w = predict_staircase(replace(spec, width=replace(c, **change)), staircase, mus).expected
+        return float(np.mean(w)) if np.isfinite(w).all() else math.inf
+
+    now = predicted({})
+    # only what narrows it (the drive model's timing bar widens a staircase whose slips fall
+    # on acceleration jumps), then those together
+    out = [{"change": label, "expected": e, "constants": change}
+           for label, change in changes if (e := predicted(change)) < now]
+    if len(out) > 1:
+        together = {k: v for o in out for k, v in o["constants"].items()}
+        out.append({"change": "all of these", "expected": predicted(together),
+                    "constants": together})
+    for o in out:   # JSON has no inf: a null bound is None, as in the width table
+        o["expected"] = o["expected"] if math.isfinite(o["expected"]) else None
+    return out
+
+
 def score(pred: WidthPrediction, objective: str) -> float:
     """Mean (``expected``) or largest (``worst``) predicted width over the mu grid [-]."""
     w = pred.expected
