@@ -58,6 +58,24 @@ twin's forward-Euler frame-rate integrator leaves a non-white residual when b is
 frames are its controller's samples, a real camera's are not), ``--error-rel`` and
 ``--max-evaluations`` the fit's settings; ``--exact`` measures a third time with the plant's
 exact kinematics (``bench_width_floor.exact_kinematics``: the floor no kinematics can beat).
+
+``--ideal-ball`` analyses each run's tracks (``tracks.csv`` of the measurement, with its
+camera) again at the tracks level four ways: as tracked (which repeats ``abu measure``'s
+width), with the exact kinematics, with the ball at its true centre plus the tracker's white
+noise (``ideal_ball.py``: beta as a perfect lighting model would leave it), and both: what a
+clean beta and perfect kinematics would give, the floor of this camera's tracking noise.
+``--zoom Z`` films every run Z times closer (``twin.scenario.magnified``, frames Z x 256 px):
+the ball's tracking noise in rad falls about as 1 / Z. ::
+
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 1000 --jobs 2 --camera 30 \
+        --ideal-ball
+    nice python benchmarks/bench_designed_runs.py --runs 72 --first 5000 --jobs 2 --camera 30 \
+        --zoom 2 --ideal-ball
+
+Measured (twelfth session): seeds 1000-1071 at 1x, medians as tracked 13.0 %, clean beta
+11.9 %, exact motion 10.5 %, both 9.0 % (531 s wall); seeds 5000-5071 at 2x: 7.8 %, 7.2 %,
+7.1 %, 6.8 %, coverage 95.8 %, theta's and beta's noise 1.11e-4 and 3.37e-4 rad (1x:
+2.73e-4, 6.07e-4), 1945 s wall on the shared machine.
 """
 from __future__ import annotations
 
@@ -82,7 +100,8 @@ import numpy as np  # noqa: E402
 from abu.cli.main import main as abu_main  # noqa: E402
 from controller.drive import Drive  # noqa: E402
 from twin.drives import DriveSpec  # noqa: E402
-from twin.scenario import random_scenario, render_scenario_frames, simulate_scenario  # noqa: E402
+from twin.scenario import (magnified, random_scenario, render_scenario_frames,  # noqa: E402
+                          simulate_scenario)
 
 TWO_PI = 2.0 * math.pi
 RANGES = ((0.01, 0.02), (0.02, 0.04), (0.03, 0.06))
@@ -102,6 +121,11 @@ SECOND_KINEMATICS: list[str] = []
 DRIVE_MODEL_WHAT_IF: dict[str, bool] = {"free_setpoint_weight": False, "exact": False}
 #: ``--camera N``: calibrate each run's lens on N chessboard views and measure with ``--camera``
 CAMERA_VIEWS: list[int] = []
+#: ``--zoom Z``: every run filmed Z times closer (pixel size / Z, frames Z x 256 px wide)
+ZOOM: list[float] = []
+#: ``--ideal-ball``: the tracks analysed again with the ball at its true centre plus the
+#: tracker's white noise (``ideal_ball.py``: beta as a perfect lighting model leaves it)
+IDEAL_BALL = {"on": False}
 MU_D_RATIO = (0.6, 1.0)
 
 
@@ -157,6 +181,7 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
             "--fps", repr(scn.fps), "--l", repr(scn.ball.l), "--d", repr(scn.ball.d)]
     if scn.lighting.reflections == 2:
         args += ["--ball-reflections", "2"]
+    cam = None
     if CAMERA_VIEWS:   # the lens calibrated as a user would, before recording
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from lens_calibration import calibrate
@@ -171,11 +196,44 @@ def render_measure(scn, design: dict, drive_name: str, out: Path) -> tuple[int, 
         s3 = measure_exact(args, state, out)
     rec.unlink()
     summary = json.loads((out / "m" / "summary.json").read_text()) if status == 0 else {}
+    if IDEAL_BALL["on"] and status == 0:
+        summary["ideal"] = ideal_ball_widths(scn, state, pos, out / "m" / "tracks.csv", cam)
     if SECOND_KINEMATICS:
         summary["second"] = s2
     if DRIVE_MODEL_WHAT_IF["exact"]:
         summary["exact"] = s3
     return status, {"scenario": scn, "state": state}, summary
+
+
+def ideal_ball_widths(scn, state: dict, pos: dict, tracks_csv: Path, cam: Path | None
+                      ) -> dict:
+    """``--ideal-ball``: the measured tracks analysed at the tracks level (as ``abu measure``,
+    with the run's camera) four ways: as tracked, and with the ball at its true centre plus the
+    tracker's white noise (``ideal_ball.py``), each with the measured and with the exact
+    kinematics; the ball's error parts [px]. {name: relative width (NaN without both bounds)}."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_width_floor import summary as tracks_summary
+    from ideal_ball import ball_error, ideal_ball
+
+    from measurement.imaging.camera import read_camera
+    from measurement.imaging.tracks_io import read_tracks_csv
+    from measurement.inference.analysis import AnalysisOptions
+
+    t = read_tracks_csv(tracks_csv)
+    err = ball_error(np.c_[t.x[:, 2], t.y[:, 2]], pos["ball"])
+    x, y = ideal_ball(t.x, t.y, pos["ball"], err.white_px, scn.seed)
+    ideal = replace(t, x=x, y=y, lost=t.lost | ~np.isfinite(x))
+    camera = read_camera(cam) if cam is not None else None
+    out = {"ball_white_px": err.white_px, "ball_leftover_px": err.leftover_px}
+    for name, tracks, exact in (("tracked", t, False), ("tracked_exact", t, True),
+                                ("ideal", ideal, False), ("ideal_exact", ideal, True)):
+        s = tracks_summary(scn, tracks, AnalysisOptions(), state if exact else None, camera)
+        lo, hi = s["mu_low"], s["mu_high"]
+        out[name] = ((hi - lo) / (0.5 * (hi + lo)) if lo is not None and hi is not None
+                     and lo > 0 and math.isfinite(hi) else math.nan)
+        out[name + "_covers"] = bool((lo or 0.0) <= scn.ball.mu <= (hi if hi is not None
+                                                                   else math.inf))
+    return out
 
 
 def measure_exact(args: list[str], state: dict, out: Path) -> dict:
@@ -228,7 +286,10 @@ def one(job: tuple) -> dict:
     seed, mu_range, drive_name, design = job
     mu, mu_d = draw(seed, mu_range)
     frames_n = int(round(design["record_s"] * design["fps_hz"])) + 1
-    scn = random_scenario(seed, n_frames=max(frames_n, 1000))
+    scn = random_scenario(seed, n_frames=max(frames_n, 1000),
+                          **({"size": int(round(256 * ZOOM[0]))} if ZOOM else {}))
+    if ZOOM:   # a camera ZOOM times closer, the frame grown to hold the ABU (bench_off_family)
+        scn = magnified(scn, ZOOM[0])
     scn = replace(scn, ball=replace(scn.ball, mu=mu, mu_d=mu_d))
     with tempfile.TemporaryDirectory() as tmp:
         status, truth, s = render_measure(scn, design, drive_name, Path(tmp))
@@ -253,6 +314,8 @@ def one(job: tuple) -> dict:
     row["sigma_white_beta_rad"] = (mf.get("noise_model") or {}).get("sigma_white_rad")
     row["lens_prior_rad"] = ((s.get("camera") or {}).get("theta_harmonic_prior") or {}).get(
         "theta_harmonic_rad")
+    if "ideal" in s:
+        row["ideal"] = s["ideal"]
     if "exact" in s:
         row["exact"] = {k: s["exact"].get(k) for k in ("mu_low", "mu_high", "relative_width")}
     if "second" in s:
@@ -528,7 +591,17 @@ def main() -> None:
     ap.add_argument("--exact", action="store_true",
                     help="with --kinematics drive-model: measure a third time with the "
                          "plant's exact kinematics (the floor) and print the ratios to it")
+    ap.add_argument("--ideal-ball", action="store_true",
+                    help="also analyse each run's tracks with the ball at its true centre plus "
+                         "the tracker's white noise, with the measured and the exact "
+                         "kinematics (what a clean beta would give)")
+    ap.add_argument("--zoom", type=float, default=None, metavar="Z",
+                    help="film every run Z times closer (twin.scenario.magnified; frames "
+                         "Z x 256 px wide): what a sharper ball track gives")
     a = ap.parse_args()
+    IDEAL_BALL["on"] = a.ideal_ball
+    if a.zoom:
+        ZOOM.append(a.zoom)
     DRIVE_MODEL_WHAT_IF["free_setpoint_weight"] = a.free_setpoint_weight
     DRIVE_MODEL_WHAT_IF["exact"] = a.exact
     if a.camera:
@@ -597,6 +670,26 @@ def report_slices(rows: list[dict]) -> None:
         report([r for r in rows if tuple(r["mu_range"]) == (lo, hi)], f"range [{lo:g}, {hi:g}]")
     report(rows, "all runs")
     report_second(rows, "all runs")
+    if any("ideal" in r for r in rows):
+        report_ideal(rows)
+
+
+def report_ideal(rows: list[dict]) -> None:
+    """``--ideal-ball``: the width with beta as a perfect lighting model leaves it and with
+    the exact kinematics, per drive and overall (medians over the runs measured)."""
+    print("what a clean beta and exact kinematics would give (tracks level, the run's camera; "
+          "'tracked' should equal abu measure's):")
+    names = ("tracked", "tracked_exact", "ideal", "ideal_exact")
+    for dname in [*DRIVES, None]:
+        sub = [r["ideal"] for r in rows if "ideal" in r and dname in (None, r["drive"])]
+        if not sub:
+            continue
+        med = {n: 100 * np.nanmedian([x[n] for x in sub]) for n in names}
+        cov = {n: 100 * np.mean([x[n + "_covers"] for x in sub]) for n in names}
+        left = np.median([x["ball_leftover_px"] / x["ball_white_px"] for x in sub])
+        print(f"  {dname or 'all runs':16s} n {len(sub):3d}: " + ", ".join(
+            f"{n} {med[n]:.1f} % (cov {cov[n]:.0f} %)" for n in names)
+            + f"; ball leftover / white {left:.1f}x")
 
 
 if __name__ == "__main__":
