@@ -17,7 +17,7 @@ CD_RADIUS_SHARE = 0.37
 
 
 def add_width_options(g: argparse._ArgumentGroup) -> None:
-    """``--noise-from`` and ``--kinematics`` of design and next."""
+    """``--noise-from``, ``--kinematics``, ``--camera`` and ``--cd-circle`` of design and next."""
     g.add_argument("--noise-from", nargs="+", default=None, metavar="SUMMARY",
                    help="abu measure summary.json of earlier recordings with this camera and "
                         "lighting: their theta and beta noise, their lens prior (a summary "
