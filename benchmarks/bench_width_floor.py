@@ -326,10 +326,11 @@ def report_ideal(rows: list[dict]) -> None:
     and, per drive kind, the tracked ball's rows beside the ideal ball's."""
     white = np.array([r["ball_white_px"] for r in rows])
     left = np.array([r["ball_leftover_px"] for r in rows])
-    print(f"the ball's error against its true centre: white (tracking) median {np.median(white):.4f}"
-          f" px, leftover (lighting) median {np.median(left):.4f} px = "
-          f"{np.median(left / white):.1f}x the white (10-90 %: {np.percentile(left / white, 10):.1f}"
-          f"-{np.percentile(left / white, 90):.1f}x)")
+    ratio = left / white
+    print(f"the ball's error against its true centre: white (tracking) median "
+          f"{np.median(white):.4f} px, leftover (lighting) median {np.median(left):.4f} px = "
+          f"{np.median(ratio):.1f}x the white (10-90 %: {np.percentile(ratio, 10):.1f}"
+          f"-{np.percentile(ratio, 90):.1f}x)")
     by_kind(rows, ["42 ms (default)", IDEAL_DEFAULT, NO_LENS, IDEAL_EXACT], [NO_LENS])
     for kind in ("all", "staircase_pi", "profile"):
         sub = [r for r in rows if kind in ("all", r["kind"])]
