@@ -126,6 +126,7 @@ from measurement.inference import analysis  # noqa: E402
 from measurement.inference.analysis import AnalysisOptions, analyse_tracks  # noqa: E402
 from measurement.inference.infer_mu import InferenceOptions  # noqa: E402
 from measurement.inference.lighting_models import alternative_orders  # noqa: E402
+from measurement.kinematics.staircase_search import FoundStaircaseInput  # noqa: E402
 from measurement.kinematics.unknown_loop import FIND  # noqa: E402
 from measurement.imaging.camera import read_camera  # noqa: E402
 from measurement.pipeline import MarkerTracks, measure_tracks  # noqa: E402
@@ -143,6 +144,11 @@ UNKNOWN = "loop unknown"
 #: (a staircase's sample time found from the record; a profile's as ``loop unknown``)
 FOUND = "sample time found"
 FIND_SAMPLE_TIME = False   # set by main() before any worker is forked
+#: ``--find-staircase``: ``abu measure --kinematics drive-model --find-staircase`` (the
+#: staircase and the loop found from the record, the sample time searched), on every
+#: recording: a profile drive's record is not a staircase and must be refused or covered
+STAIRCASE_FOUND = "staircase found"
+FIND_STAIRCASE = {"on": False}
 #: ``--ideal-ball``: also the rows with the ball's track as a perfect lighting model leaves it
 IDEAL = {"on": False}
 IDEAL_DEFAULT, IDEAL_EXACT = "ideal ball", "ideal ball, exact, no lens"
@@ -293,6 +299,20 @@ def one(job: tuple[int, str | None, int]) -> dict:
         row["model_found"], row["loop_found"] = s["estimator"].get("model"), s["estimator"].get(
             "loop")
         row["why_found"] = s["estimator"].get("why", "")
+    if FIND_STAIRCASE["on"]:
+        started = time.perf_counter()
+        s = summary(scn, tracks, AnalysisOptions(kinematics="drive-model",
+                                                 drive_model=FoundStaircaseInput()))
+        row["bounds"][STAIRCASE_FOUND] = (s["mu_low"], s["mu_high"])
+        row["model_stair"], row["loop_stair"] = s["estimator"].get("model"), s["estimator"].get(
+            "loop")
+        row["why_stair"], row["stair_s"] = s["estimator"].get("why", ""), round(
+            time.perf_counter() - started, 2)
+        if scn.drive.kind == "staircase_pi":
+            d = scn.drive
+            row["stair_truth"] = (f"{abs(d.omega_end - d.omega0) / d.step:.0f} steps "
+                                  f"(span {abs(d.omega_end - d.omega0) / d.step:.3f}), "
+                                  f"rounding {d.rounding}, te {d.te:.4g} s")
     if IDEAL["on"]:
         ideal_rows(row, scn, state, tracks)
     if views:
@@ -416,7 +436,7 @@ def by_kind(rows: list[dict], analyses: list[str], refs: list[str]) -> None:
 def report_by_kind(rows: list[dict]) -> None:
     """Default, known drive and exact per drive kind; width ratios to the exact row on the
     recordings where both are finite; the model's refusals."""
-    by_kind(rows, ["42 ms (default)", KNOWN] + [n for n in (UNKNOWN, FOUND)
+    by_kind(rows, ["42 ms (default)", KNOWN] + [n for n in (UNKNOWN, FOUND, STAIRCASE_FOUND)
                                                 if n in rows[0]["bounds"]]
             + [EXACT, NO_LENS], [EXACT])
     for r in rows:
@@ -437,6 +457,26 @@ def report_by_kind(rows: list[dict]) -> None:
                  and r.get("model_found") == "accepted"]
         for loop in sorted(set(loops)):
             print(f"    {loops.count(loop)} staircases: {loop}")
+
+
+def report_staircase_found(rows: list[dict]) -> None:
+    """``--find-staircase``: acceptance per drive kind, the time it took, the refusals, and
+    the staircase found beside the truth."""
+    for kind in ("staircase_pi", "profile"):
+        sub = [r for r in rows if r["kind"] == kind]
+        if not sub:
+            continue
+        ok = [r for r in sub if r["model_stair"] == "accepted"]
+        t = np.array([r["stair_s"] for r in sub])
+        print(f"  {STAIRCASE_FOUND}, {kind}: accepted on {len(ok)} of {len(sub)}; "
+              f"{np.median(t):.1f} s a recording (10-90 %: {np.percentile(t, 10):.1f}-"
+              f"{np.percentile(t, 90):.1f} s, all analyses of a recording in one process)")
+        for r in sub:
+            if r["model_stair"] != "accepted":
+                print(f"    seed {r['seed']}: {r['why_stair'][:160]}")
+            elif kind == "staircase_pi":
+                print(f"    seed {r['seed']}: truth {r['stair_truth']}; found: "
+                      f"{r['loop_stair'].split(': ', 1)[-1]}")
 
 
 def report_camera(rows: list[dict]) -> None:
@@ -474,6 +514,8 @@ def print_tables(rows: list[dict]) -> None:
         report_camera(rows)
     if IDEAL_EXACT in rows[0]["bounds"]:
         report_ideal(rows)
+    if STAIRCASE_FOUND in rows[0]["bounds"]:
+        report_staircase_found(rows)
 
 
 def family_seeds(first: int, n: int, two_spot: int) -> list[tuple[int, str | None]]:
@@ -501,6 +543,9 @@ def main() -> None:
                          "time left to the search (row 'loop, sample time unknown')")
     ap.add_argument("--report", default=None,
                     help="print the tables of rows written by --out (nothing is run)")
+    ap.add_argument("--find-staircase", action="store_true",
+                    help="also the row 'staircase found': abu measure --kinematics "
+                         "drive-model --find-staircase on every recording")
     ap.add_argument("--ideal-ball", action="store_true",
                     help="also analyse each recording with the ball at its true centre plus "
                          "the tracker's white noise (no lighting leftover; ideal_ball.py)")
@@ -508,6 +553,7 @@ def main() -> None:
     global FIND_SAMPLE_TIME
     FIND_SAMPLE_TIME = a.find_sample_time
     IDEAL["on"] = a.ideal_ball
+    FIND_STAIRCASE["on"] = a.find_staircase
     if a.report:
         rows = [json.loads(line) for line in open(a.report)]
         print(f"rows of {a.report}: {len(rows)} recordings")

@@ -7,7 +7,9 @@ design``). Times are on the recording's clock (the fit adds a time offset within
 the camera's trigger). Without ``--drive`` the loop is unknown and fitted freely from the
 record (:mod:`measurement.kinematics.unknown_loop`); a staircase's controller sample time is
 then ``--controller-sample-time`` (seconds, or ``continuous``), or, left out, found from the
-record among candidates (:mod:`measurement.kinematics.sample_time_search`).
+record among candidates (:mod:`measurement.kinematics.sample_time_search`). With
+``--find-staircase`` the staircase itself is found from the record as well
+(:mod:`measurement.kinematics.staircase_search`).
 """
 from __future__ import annotations
 
@@ -31,6 +33,12 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
                    help="profile.json ('abu design' for a tracking drive): the prescribed speed "
                         "profile the --drive (model tracking) followed; with --kinematics "
                         "drive-model, instead of the staircase options")
+    p.add_argument("--find-staircase", action="store_true",
+                   help="with --kinematics drive-model and without --drive: the staircase the "
+                        "drive followed (the report's inclined sine in steps of --step-hz) "
+                        "found from the record, its start, duration, span and rounding fitted "
+                        "with the loop (5-25 s), instead of the staircase options "
+                        "(summary.json estimator.loop names the staircase found)")
     g = p.add_argument_group("staircase of the drive (with --kinematics drive-model)")
     g.add_argument("--omega0-hz", type=float, default=None, help="initial speed [Hz]")
     g.add_argument("--omega-end-hz", type=float, default=None,
@@ -65,11 +73,17 @@ def drive_model_from_args(args: argparse.Namespace):
     """The analysis's drive-model input (None with ``--kinematics savgol``): a
     ``DriveModelInput`` or ``ProfileModelInput`` with ``--drive``, an ``UnknownLoopInput``
     without; raises ParameterError naming the option."""
+    find = getattr(args, "find_staircase", False)
     if args.kinematics != "drive-model":
+        if find:
+            raise ParameterError("--find-staircase", True, "--kinematics drive-model with it "
+                                 "(the staircase is found for the drive model's fit)")
         return None
     from controller.drive import load_drive
     from measurement.kinematics.drive_model import DriveModelInput
 
+    if find:
+        return _found_staircase_input(args)
     if not args.drive:
         return _unknown_loop_input(args)
     drive = load_drive(args.drive)
@@ -108,6 +122,31 @@ def _staircase(args: argparse.Namespace):
                              "a speed of the same sign as --omega0-hz (the drive turns one way)")
     return as_setpoints(Staircase(args.omega0_hz * HZ, args.omega_end_hz * HZ, args.t0,
                                   args.te, step=args.step_hz * HZ, rounding=args.rounding))
+
+
+def _found_staircase_input(args: argparse.Namespace):
+    """``--find-staircase``: the staircase and the loop found from the record; what it
+    replaces or cannot use is refused by name."""
+    from measurement.kinematics.staircase_search import FIND, FoundStaircaseInput
+
+    for opt, value in (("--drive", args.drive), ("--profile", args.profile),
+                       ("--omega0-hz", args.omega0_hz), ("--omega-end-hz", args.omega_end_hz),
+                       ("--te", args.te)):
+        if value is not None:
+            raise ParameterError(opt, value, "left out with --find-staircase (the staircase "
+                                 "and the loop are found from the record; state the staircase "
+                                 "instead to have it used as given)")
+    if not (math.isfinite(args.step_hz) and args.step_hz > 0):
+        raise ParameterError("--step-hz", args.step_hz, "a finite setpoint step > 0 Hz")
+    sample_time = args.controller_sample_time
+    if sample_time == "continuous":
+        sample_time = None
+    elif sample_time is None:
+        sample_time = FIND
+    elif not (math.isfinite(sample_time) and 0 < sample_time <= 0.1):
+        raise ParameterError("--controller-sample-time", sample_time,
+                             "a sample time in (0, 0.1] s, or 'continuous'")
+    return FoundStaircaseInput(step_rad_s=args.step_hz * HZ, sample_time_s=sample_time)
 
 
 def _unknown_loop_input(args: argparse.Namespace):
