@@ -148,3 +148,14 @@ def test_find_staircase_refuses_what_it_cannot_use_by_name(tmp_path, capsys, ext
     assert status == 2
     assert option in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"step_rad_s": 0.0}, "step_rad_s"), ({"step_rad_s": float("nan")}, "step_rad_s"),
+    ({"sample_time_s": -1e-3}, "sample_time_s"), ({"sample_time_s": float("inf")}, "sample_time_s"),
+    ({"sample_time_s": "fast"}, "sample_time_s"),
+])
+def test_the_python_input_refuses_a_step_or_sample_time_that_makes_no_sense(kwargs, field):
+    from abu_model.errors import ParameterError
+    with pytest.raises(ParameterError, match=field):
+        FoundStaircaseInput(**kwargs)

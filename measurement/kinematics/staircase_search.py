@@ -41,12 +41,13 @@ from abu_model.loop_response import Setpoints, response, sampled
 from controller.drive import Drive
 
 from measurement.kinematics.drive_model import _Model, fit_drive_model
-from measurement.kinematics.estimators import noise_sigma
+from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import (DriveFit, DriveModelSettings, fit_model,
                                               linear_basis)
 from measurement.kinematics.staircase_guess import (SineStaircase, candidate_staircases,
                                                     start_span, sine_guess, timing_grid)
-from measurement.kinematics.unknown_loop import FIND, GOOD_ENOUGH_RMS, UnknownLoopInput
+from measurement.kinematics.unknown_loop import (FIND, GOOD_ENOUGH_RMS, UnknownLoopInput,
+                                                 _free_settings)
 
 TWO_PI = 2.0 * math.pi
 #: Step 2 fits the time offset within +- this [s] and te within this range of the grid's
@@ -215,10 +216,6 @@ def _sine_assignment(time: np.ndarray, theta: np.ndarray, found: _Found, p: np.n
     return np.asarray(min(scored)[1], float) * period
 
 
-def _free_settings() -> DriveModelSettings:
-    return DriveModelSettings(free_loop=True, max_evaluations=1000)
-
-
 @dataclass(frozen=True)
 class FoundStaircaseInput:
     """The drive-model input of ``--find-staircase`` (module doc): the setpoint's step
@@ -228,6 +225,16 @@ class FoundStaircaseInput:
     step_rad_s: float = TWO_PI
     sample_time_s: float | str | None = FIND
     settings: DriveModelSettings = field(default_factory=_free_settings)
+
+    def __post_init__(self) -> None:
+        from abu_model.errors import ParameterError
+        if not (math.isfinite(self.step_rad_s) and self.step_rad_s > 0):
+            raise ParameterError("step_rad_s", self.step_rad_s, "a setpoint step > 0 rad/s")
+        st = self.sample_time_s
+        if st is not None and st != FIND and not (
+                isinstance(st, (int, float)) and math.isfinite(st) and st > 0):
+            raise ParameterError("sample_time_s", st, f"a sample time > 0 s, None "
+                                 f"(continuous) or {FIND!r} (found from the record)")
 
     @property
     def theta_harmonics_fitted(self) -> bool:
@@ -255,7 +262,7 @@ class FoundStaircaseInput:
             # step 4, so every candidate can look wrong there (the family's seeds 0-59: 16 of
             # 39 staircases accepted without this, against 18 of 18 with the frame interval
             # stated in the development runs)
-            frame = float(np.median(np.diff(t)))
+            frame = sample_interval(t)
             fit = replace(self, sample_time_s=frame)._stepped(t, th, sigma, found, frame)
             period = frame
             if fit.accepted:
