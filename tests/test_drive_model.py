@@ -233,7 +233,7 @@ def test_steps_on_one_controller_sample_merge_and_keep_the_step_locked_test():
     gives one step to the later level (same response), so the step-locked whiteness test keeps
     its window (a zero gap between steps used to cut it to nothing, silently)."""
     from abu_model.loop_response import sampled
-    from measurement.kinematics.drive_model import _Model
+    from measurement.kinematics.drive_model import LoopModel
     from measurement.kinematics.model_fit import DriveModelSettings
     sp = Setpoints((0.0101, 0.0105, 0.03, 0.05, 0.07), (0.0, 1.0, 2.0, 3.0, 4.0, 5.0))
     merged = sampled(sp, 1e-3)
@@ -243,7 +243,7 @@ def test_steps_on_one_controller_sample_merge_and_keep_the_step_locked_test():
     raw = Setpoints((0.011, 0.011, 0.03, 0.05, 0.07), sp.levels)   # the old, unmerged form
     assert np.allclose(response(merged, t, 0.7, 12.0).theta, response(raw, t, 0.7, 12.0).theta,
                        rtol=0, atol=1e-12)
-    model = _Model(t, Drive("pi-lag", 0.7, 12.0, 0.02, sample_time=1e-3), sp,
+    model = LoopModel(t, Drive("pi-lag", 0.7, 12.0, 0.02, sample_time=1e-3), sp,
                    DriveModelSettings())
     frames, window = model.step_frames(np.asarray(model.x0))
     assert frames.tolist() == [11, 30, 50, 70] and window == 16
@@ -298,7 +298,7 @@ def test_omega_dot_after_the_steps_of_a_short_lag_has_an_honest_bar():
     """A 0.3 ms torque lag (omega_dot jumps within ~1 frame at each step; a lag that short and a
     delay look alike in theta, so the fit may place the step a frame early): over the frames
     from one before to 19 after each step the model's bar covers the true omega_dot in >= 93 %
-    (without the timing term of ``_Model.step_sigma`` the jump frames err by up to ~100 %)."""
+    (without the timing term of ``LoopModel.step_sigma`` the jump frames err by up to ~100 %)."""
     inside, worst = [], []
     for seed in range(4):
         t, th, alpha, spec, sp = _twin_record(200 + seed, 0.0, tau_motor=0.0003)

@@ -16,8 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from abu.cli.main import main as abu_main  # noqa: E402
 from measurement.kinematics.estimators import savgol_kinematics  # noqa: E402
-from measurement.kinematics.staircase_guess import (ROUNDING_OFFSETS, progress,  # noqa: E402
-                                                    progress_root)
+from measurement.kinematics.staircase_guess import (ROUNDING_OFFSETS,  # noqa: E402
+                                                    SineStaircase, progress, progress_root)
 from measurement.kinematics.staircase_search import FoundStaircaseInput  # noqa: E402
 from test_unknown_loop import _tracks_csv  # noqa: E402
 
@@ -47,9 +47,16 @@ def _record(seed: int, rounding: str):
     return t, theta, r["alpha"], spec
 
 
-def test_the_vectorised_sine_progress_inverts():
+def test_the_vectorised_sine_progress_inverts_and_is_the_staircases_own():
+    """progress is controller.reference's scalar sine_progress on arrays, and progress_root
+    its inverse (the step fractions are those of controller.reference.Staircase)."""
+    from controller.reference import Staircase, sine_progress
     x = np.linspace(0.0, 1.0, 1001)
+    assert np.allclose(progress(x), [sine_progress(v) for v in x], rtol=0, atol=1e-15)
     assert np.allclose(progress_root(progress(x)), x, atol=1e-9)
+    stair = Staircase(-TWO_PI * 9, -TWO_PI * 19.5, 0.0, 0.5, rounding="nearest")
+    mine = SineStaircase(0.0, ROUNDING_OFFSETS["nearest"], 10, -TWO_PI * 9, -1.0, TWO_PI)
+    assert np.allclose(mine.setpoints(0.5, 10.5).step_times, stair.step_times, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed, rounding", [(9102, "lead"), (9103, "nearest"),

@@ -46,7 +46,7 @@ from measurement.kinematics.model_fit import (STEP_BIN_S, STEP_WINDOW_S, DriveFi
 LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
         ("tau_motor_s", "tau_motor", 0.0), ("setpoint_weight", "setpoint_weight", 1e-3),
         ("setpoint_tau_s", "setpoint_tau", 0.0))
-#: The timing bar on omega_dot (:meth:`_Model.step_sigma`) looks this many samples either side.
+#: The timing bar on omega_dot (:meth:`LoopModel.step_sigma`) looks this many samples either side.
 TIMING_SAMPLES = 1.0
 
 
@@ -65,8 +65,17 @@ class DriveModelInput:
                                sigma_theta=sigma_theta, settings=self.settings)
 
 
-class _Model:
-    """theta, omega, omega_dot of the parametrised drive at the frame times."""
+class LoopModel:
+    """theta, omega, omega_dot of the parametrised drive at the frame times: the model that
+    :func:`~measurement.kinematics.model_fit.fit_model` fits (``names``, ``x0``, ``lo``, ``hi``,
+    ``prior``, :meth:`evaluate`; :meth:`step_frames` and :meth:`step_sigma` for the tests and
+    the error bars).
+
+    The parameters are the time offset, then the loop's (:data:`LOOP`). A model with more
+    (a staircase whose timing is fitted, :mod:`.staircase_search`) appends them with
+    :meth:`add_parameter` and overrides :meth:`setpoints_for`: everything here reads the
+    loop's values by name and the staircase through that hook.
+    """
 
     def __init__(self, time: np.ndarray, drive: Drive, setpoints: Setpoints,
                  settings: DriveModelSettings, t_off_s: float = 0.0):
@@ -97,11 +106,22 @@ class _Model:
             self.lo.append(low)
             self.hi.append(UPPER[name])
 
+    def add_parameter(self, name: str, x0: float, lo: float, hi: float) -> None:
+        """One more fitted parameter (after the loop's), started at x0 within [lo, hi]."""
+        self.names.append(name)
+        self.x0.append(x0)
+        self.lo.append(lo)
+        self.hi.append(hi)
+
+    def setpoints_for(self, p: np.ndarray) -> Setpoints:
+        """The staircase (as the controller applies it) at the parameters p: fixed here."""
+        return self.sp
+
     def step_frames(self, p: np.ndarray) -> tuple[np.ndarray, int]:
         """Frame index of each step's first frame (steps with a whole window in the record)
         and the window length [frames] of the step-locked whiteness test."""
         dt = float(self.t[1] - self.t[0])
-        steps = np.asarray(self.sp.step_times, float) + p[0]
+        steps = np.asarray(self.setpoints_for(p).step_times, float) + p[0]
         gap = float(np.min(np.diff(steps))) if steps.size > 1 else STEP_WINDOW_S
         n_bin = max(1, int(round(STEP_BIN_S / dt)))
         window = n_bin * max(0, int(min(gap, STEP_WINDOW_S) / dt) // n_bin)
@@ -118,7 +138,8 @@ class _Model:
         dt = float(self.t[1] - self.t[0])
         delta = TIMING_SAMPLES * (self.sample_time or dt)
         near = np.ones(self.t.size, bool)
-        steps = np.asarray(self.sp.step_times, float) + p[0]
+        sp = self.setpoints_for(p)
+        steps = np.asarray(sp.step_times, float) + p[0]
         if not self.sample_time:
             k = np.searchsorted(steps, self.t)
             left = steps[np.clip(k - 1, 0, steps.size - 1)]
@@ -128,7 +149,7 @@ class _Model:
         if near.any() and steps.size:
             zeta, wn, tau, b, tau_f = self.loop(p)
             tt = self.t[near] - p[0]
-            up, down = (response(self.sp, tt + s_, zeta, wn, tau, b, False,
+            up, down = (response(sp, tt + s_, zeta, wn, tau, b, False,
                                  setpoint_tau=tau_f).alpha for s_ in (delta, -delta))
             out[near] = 0.5 * np.abs(up - down)
         return out
@@ -141,7 +162,8 @@ class _Model:
     def evaluate(self, p: np.ndarray, need_theta: bool = True):
         """(Theta, omega, omega_dot) of the loop alone (no linear terms) at the frame times."""
         zeta, wn, tau, b, tau_f = self.loop(p)
-        r = response(self.sp, self.t - p[0], zeta, wn, tau, b, need_theta, setpoint_tau=tau_f)
+        r = response(self.setpoints_for(p), self.t - p[0], zeta, wn, tau, b, need_theta,
+                     setpoint_tau=tau_f)
         return (r.theta if need_theta else None), r.omega, r.alpha
 
 
@@ -163,7 +185,7 @@ def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints
     if np.sign(slope) != np.sign(levels[0]) or np.any(np.sign(levels) != np.sign(levels[0])):
         return DriveFit(False, f"the record turns at {slope:.4g} rad/s on average, the "
                                f"staircase from {levels[0]:.4g} rad/s: not the same direction")
-    return fit_model(t, th, _Model(t, drive, setpoints, st, t_off_s), sigma, st)
+    return fit_model(t, th, LoopModel(t, drive, setpoints, st, t_off_s), sigma, st)
 
 
 def start_cost(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints,
@@ -174,7 +196,7 @@ def start_cost(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Set
     st = settings or DriveModelSettings()
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
-    model = _Model(t, drive, setpoints, st)
+    model = LoopModel(t, drive, setpoints, st)
     basis = linear_basis(t, th, st.harmonics)
     with np.errstate(over="ignore", invalid="ignore"):
         e = th - model.evaluate(np.array(model.x0, float))[0]
@@ -194,7 +216,7 @@ def quick_fit(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setp
     fitted with one sample time has absorbed part of its step timing."""
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
-    model = _Model(t, drive, setpoints, settings, t_off_s)
+    model = LoopModel(t, drive, setpoints, settings, t_off_s)
     with np.errstate(over="ignore", invalid="ignore"):
         try:
             sol, _, _ = solve(t, th, model, 1.0, settings, max_evaluations)

@@ -52,8 +52,10 @@ GRID_LOOPS = (dict(zeta=0.8, omega_n=12.0, tau_motor=0.01, setpoint_weight=0.8,
 
 
 def progress(x: np.ndarray) -> np.ndarray:
-    """The inclined sine's progress p(x) = x - sin(2 pi x) / (2 pi), vectorised
-    (:func:`controller.reference.sine_progress`)."""
+    """The inclined sine's progress p(x) = x - sin(2 pi x) / (2 pi), vectorised: the search
+    evaluates it on whole grids. :func:`controller.reference.sine_progress` is the scalar
+    form; that module stays standard-library only (it runs inside the Staircase FMU), so
+    the NumPy form lives here (the two are compared in tests/test_staircase_search.py)."""
     x = np.asarray(x, float)
     return x - np.sin(TWO_PI * x) / TWO_PI
 

@@ -40,7 +40,7 @@ import numpy as np
 from abu_model.loop_response import Setpoints, response, sampled
 from controller.drive import Drive
 
-from measurement.kinematics.drive_model import _Model, fit_drive_model
+from measurement.kinematics.drive_model import LoopModel, fit_drive_model
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import (DriveFit, DriveModelSettings, fit_model,
                                               linear_basis)
@@ -66,7 +66,7 @@ SINE_TE_REL = 0.002
 SINE_SPAN = 0.01
 
 
-class _SineModel(_Model):
+class _SineModel(LoopModel):
     """The continuous loop over a :class:`SineStaircase` whose te [s] and span [steps] are
     fitted beside the time offset and the loop (step 2)."""
 
@@ -75,31 +75,16 @@ class _SineModel(_Model):
         self.stair = stair
         super().__init__(time, drive, stair.setpoints(te_s, span_steps), settings, t_off_s)
         self.lo[0], self.hi[0] = -T_OFF_RANGE_S, T_OFF_RANGE_S
-        self.names += ["staircase_te_s", "staircase_span_steps"]
-        self.x0 += [te_s, span_steps]
-        self.lo += [TE_RANGE[0] * te_s, float(stair.n)]
-        self.hi += [TE_RANGE[1] * te_s, stair.n + 1.0 - 1e-6]
-        self._key: tuple[float, float] | None = None
+        self.add_parameter("staircase_te_s", te_s, TE_RANGE[0] * te_s, TE_RANGE[1] * te_s)
+        self.add_parameter("staircase_span_steps", span_steps, float(stair.n),
+                           stair.n + 1.0 - 1e-6)
+        self._key = (te_s, span_steps)
 
-    def _update(self, p: np.ndarray) -> None:
+    def setpoints_for(self, p: np.ndarray) -> Setpoints:
         key = (float(p[-2]), float(p[-1]))
-        if key != self._key:
+        if key != self._key:   # the fit's Jacobian moves one parameter at a time: cached
             self.sp, self._key = self.stair.setpoints(*key), key
-
-    def loop(self, p: np.ndarray) -> tuple[float, float, float, float, float]:
-        return super().loop(p[:-2])
-
-    def evaluate(self, p: np.ndarray, need_theta: bool = True):
-        self._update(p)
-        return super().evaluate(p, need_theta)
-
-    def step_frames(self, p: np.ndarray):
-        self._update(p)
-        return super().step_frames(p)
-
-    def step_sigma(self, p: np.ndarray) -> np.ndarray:
-        self._update(p)
-        return super().step_sigma(p)
+        return self.sp
 
 
 def _key(fit: DriveFit) -> tuple[bool, float]:
