@@ -92,7 +92,7 @@ def loop_polynomials(zeta: float, omega_n: float, tau: float = 0.0, weight: floa
     den = np.array([tau, 1.0, 2.0 * zeta * omega_n, omega_n**2]) if tau > 0 else \
         np.array([1.0, 2.0 * zeta * omega_n, omega_n**2])
     if setpoint_tau > _NO_FILTER_S:
-        den = np.polymul(den, [setpoint_tau, 1.0])
+        den = np.convolve(den, [setpoint_tau, 1.0])   # np.polymul's product, ~30x cheaper
     return num, den
 
 
@@ -102,15 +102,21 @@ def modes(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0,
     """Poles p_i [1/s] and step-response residues c_i [-] of the loop (complex arrays, not
     to be modified: cached)."""
     num, den = loop_polynomials(zeta, omega_n, tau, weight, setpoint_tau)
-    poles = np.asarray(np.roots(den), dtype=complex)
+    # np.roots' companion matrix, built here: the fits call this with new parameters at every
+    # evaluation, and np.roots' checks cost as much as the eigenvalues (den has no zero
+    # coefficient at either end: omega_n > 0 and a positive leading one)
+    companion = np.diag(np.ones(den.size - 2), -1)
+    companion[0, :] = -den[1:] / den[0]
+    poles = np.asarray(np.linalg.eigvals(companion), dtype=complex)
     scale = float(np.max(np.abs(poles)))
     for i in range(len(poles)):
         for j in range(i):
             if abs(poles[i] - poles[j]) < _SPLIT * scale:
                 poles[i] += _SPLIT * scale * (1 + i)
     # D'(p) from the (possibly split) poles: lead * prod_{j != i} (p_i - p_j)
-    lead = den[0]
-    dprime = np.array([lead * np.prod(np.delete(poles[i] - poles, i)) for i in range(len(poles))])
+    gaps = poles[:, None] - poles[None, :]
+    np.fill_diagonal(gaps, 1.0)
+    dprime = den[0] * gaps.prod(axis=1)
     residues = np.polyval(num, poles) / (poles * dprime)
     return poles, residues
 
@@ -147,13 +153,23 @@ def response(setpoints: Setpoints, t: Sequence[float] | np.ndarray, zeta: float,
         Z[j + 1] = Z[j] * np.exp(poles * gap) + dw[j]
     # before the first step z = 0 (no exp of a time before it: it could overflow)
     since = np.where(k > 0, t - tk[np.maximum(k - 1, 0)], 0.0)
-    z = Z[k] * np.exp(np.outer(since, poles))
-    # explicit sums, not '@': a threaded BLAS call costs more than these tiny products
-    omega = level + np.real((z * res).sum(axis=1))
-    alpha = np.real((z * (res * poles)).sum(axis=1))
+    z = (Z[k] * np.exp(np.outer(since, poles))).view(np.float64)   # (times, 2 poles) reals
+    omega = level + _real_sum(z, res)
+    alpha = _real_sum(z, res * poles)
     theta = np.empty(0)
     if need_theta:
         ramp = levels[0] * t + np.concatenate([[0.0], np.cumsum(dw)])[k] * t \
             - np.concatenate([[0.0], np.cumsum(dw * tk)])[k]
-        theta = ramp + np.real(((z - (level - levels[0])[:, None]) * (res / poles)).sum(axis=1))
+        c = res / poles
+        theta = ramp + _real_sum(z, c) - (level - levels[0]) * float(np.real(c.sum()))
     return LoopResponse(t, omega, alpha, theta)
+
+
+def _real_sum(z_pairs: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Re(sum_i c_i z_i) of each row, z as (re, im) pairs of reals. einsum, not '@' nor a
+    complex product and sum: a threaded BLAS call costs more than these tiny products, and
+    the complex temporaries 3x more than this (the fits evaluate the response thousands of
+    times)."""
+    w = np.empty(2 * c.size)
+    w[0::2], w[1::2] = c.real, -c.imag
+    return np.einsum("ij,j->i", z_pairs, w)
