@@ -44,7 +44,7 @@ GUESS_EVERY = 3
 #: The timing grid: durations relative to the guess's (~2 % apart: late steps move by a
 #: fraction of the gap between steps), start times [s] relative to the guess's, and two
 #: generic loops (a slow and a fast PI with torque lag, setpoint weight and filter).
-GRID_TE = tuple(np.exp(np.linspace(math.log(0.75), math.log(1.45), 34)).tolist())
+GRID_TE = tuple(np.exp(np.linspace(math.log(0.65), math.log(1.6), 46)).tolist())
 GRID_T0_S = tuple(np.arange(-0.14, 0.04, 0.004).tolist())
 GRID_LOOPS = (dict(zeta=0.8, omega_n=12.0, tau_motor=0.01, setpoint_weight=0.8,
                    setpoint_tau=0.005),
