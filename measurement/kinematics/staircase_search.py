@@ -74,7 +74,7 @@ N_CANDIDATES = 6
 #: over +- SINE_TE_REL (at least 2 SINE_SHIFTS + 1 points, at most SINE_TE_MAX), spans within
 #: +- SINE_SPAN steps in 5; the best SINE_RESCORE assignments scored again. +- 0.6 %, not
 #: 0.2 %: a frame-rate controller's sampling biases the continuous fit's te by up to 0.4 %
-#: (8 of its standard errors, seed 11 of benchmarks/bench_staircase_search.py).
+#: (8 of its standard errors: the fast staircase of tests/test_staircase_search.py).
 SINE_SHIFTS = 8
 SINE_TE_REL = 0.006
 SINE_TE_MAX = 161
@@ -326,8 +326,8 @@ class FoundStaircaseInput:
         if not fit.accepted and self.sample_time_s in (FIND, None) and found.on_all_samples \
                 and found.fit.accepted:
             # step 2's own fit passed the tests: the staircase's timing fitted with the loop,
-            # continuous (seed 11 of benchmarks/bench_staircase_search.py: a frame-rate
-            # controller, 13 steps in 0.25 s; every digital fit over the steps found refused)
+            # continuous (a controller fast enough to look continuous, whose sample time is
+            # not among the candidates: tests/test_staircase_search.py, a 30 kHz controller)
             fit, period = found.fit, 0.0
             if self.sample_time_s == FIND:
                 fit.params = {**fit.params, "controller_sample_time_s": 0.0}
