@@ -22,10 +22,10 @@ report sec. 4.2) but not its figures on the camera's clock, and has not identifi
    a sample off lands on another sample, which leaves a residual that is not white (without
    this step the three records of ``tests/test_staircase_search.py`` are refused). The
    sine's start within +- a sample, its duration within +- 0.6 % and its span within +- 0.01
-   step (or 3 of step 2's standard errors, if wider) are searched; each distinct assignment
-   of steps to samples is scored by its residual (the loop and offset linearised, projected
-   out with the nuisance terms), and the loop is fitted again over the best one. The
-   staircase reported is the sine that gives that assignment.
+   step (or 3 of step 2's standard errors where wider, up to three times those) are searched;
+   each distinct assignment of steps to samples is scored by its residual (the loop and
+   offset linearised, projected out with the nuisance terms), and the loop is fitted again
+   over the best one. The staircase reported is the sine that gives that assignment.
 
 Where steps 3-4 refuse every sample time but step 2's fit on all samples passed the tests
 (a controller fast enough to look continuous), that fit is the result, continuous.
@@ -53,7 +53,7 @@ from measurement.kinematics.model_fit import (DriveFit, DriveModelSettings, fit_
 from measurement.kinematics.staircase_guess import (SineStaircase, candidate_staircases,
                                                     start_span, sine_guess, timing_grid)
 from measurement.kinematics.unknown_loop import (FIND, GOOD_ENOUGH_RMS, UnknownLoopInput,
-                                                 _free_settings)
+                                                 _free_settings, check_sample_time)
 
 TWO_PI = 2.0 * math.pi
 #: Step 2 fits the time offset within +- this [s] and te within this range of the grid's
@@ -276,11 +276,7 @@ class FoundStaircaseInput:
         from abu_model.errors import ParameterError
         if not (math.isfinite(self.step_rad_s) and self.step_rad_s > 0):
             raise ParameterError("step_rad_s", self.step_rad_s, "a setpoint step > 0 rad/s")
-        st = self.sample_time_s
-        if st is not None and st != FIND and not (
-                isinstance(st, (int, float)) and math.isfinite(st) and st > 0):
-            raise ParameterError("sample_time_s", st, f"a sample time > 0 s, None "
-                                 f"(continuous) or {FIND!r} (found from the record)")
+        check_sample_time(self.sample_time_s)
 
     @property
     def theta_harmonics_fitted(self) -> bool:
@@ -337,9 +333,10 @@ class FoundStaircaseInput:
         """``fit`` with the staircase found in its params and loop text (its own sine where
         step 4 chose one)."""
         q = found.fit.params
-        sine = {"staircase_t0_s": found.stair.t0_s, "staircase_te_s": found.te_s,
-                "staircase_span_steps": found.span_steps}
-        sine = {k: fit.params.get(k, v) if fit is not found.fit else v for k, v in sine.items()}
+        # step 4's sine where it chose one (its params hold it), else step 2's
+        sine = {k: fit.params.get(k, v) for k, v in (
+            ("staircase_t0_s", found.stair.t0_s), ("staircase_te_s", found.te_s),
+            ("staircase_span_steps", found.span_steps))}
         fit.params = {**fit.params, **sine, "staircase_steps": float(found.stair.n),
                       "staircase_rounding_offset": found.stair.offset,
                       "staircase_omega0_rad_s": found.stair.omega0_rad_s

@@ -83,6 +83,16 @@ def _free_settings() -> DriveModelSettings:
     return DriveModelSettings(free_loop=True, max_evaluations=1000)
 
 
+def check_sample_time(sample_time_s: float | str | None) -> None:
+    """Raise a ParameterError naming ``sample_time_s`` unless it is a sample time > 0 s,
+    None (a continuous controller) or :data:`FIND` (found from the record)."""
+    st = sample_time_s
+    if st is not None and st != FIND and not (
+            isinstance(st, (int, float)) and math.isfinite(st) and st > 0):
+        raise ParameterError("sample_time_s", st, f"a sample time > 0 s, None "
+                             f"(continuous) or {FIND!r} (found from the record)")
+
+
 @dataclass(frozen=True)
 class UnknownLoopInput:
     """What the kinematics need when the loop is unknown: the reference the drive followed (a
@@ -105,11 +115,7 @@ class UnknownLoopInput:
         if (self.setpoints is None) == (self.profile is None):
             raise ParameterError("setpoints, profile", (self.setpoints, self.profile),
                                  "a staircase or a profile (one of them)")
-        st = self.sample_time_s
-        if st is not None and st != FIND and not (
-                isinstance(st, (int, float)) and math.isfinite(st) and st > 0):
-            raise ParameterError("sample_time_s", st, f"a sample time > 0 s, None "
-                                 f"(continuous) or {FIND!r} (found from the record)")
+        check_sample_time(self.sample_time_s)
 
     @property
     def theta_harmonics_fitted(self) -> bool:
