@@ -29,6 +29,12 @@ one BLAS thread) of the search and of the stated-staircase fit, with their media
 Run::
 
     nice python benchmarks/bench_staircase_search.py --first 0 --n 24 --jobs 2
+
+and, against the search of another commit (alternated pairs of fresh processes, CPU of the
+search alone)::
+
+    git worktree add /tmp/before COMMIT
+    python benchmarks/bench_staircase_search.py --first 0 --n 6 --against /tmp/before
 """
 from __future__ import annotations
 
@@ -42,7 +48,9 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT)]
+# --code DIR: the search of another checkout (the timing pairs of --against run this file so)
+CODE = Path(sys.argv[sys.argv.index("--code") + 1]) if "--code" in sys.argv else ROOT
+sys.path[:0] = [str(CODE)]
 
 import numpy as np  # noqa: E402
 
@@ -182,13 +190,53 @@ def _report(rows: list[dict], label: str) -> None:
                   f"te {r['te']:.3f} s: {r['why']}")
 
 
+def _search_cpu(seeds: list[int]) -> float:
+    """CPU time [s] of the search alone over these seeds' records (one process)."""
+    from measurement.kinematics.staircase_search import FoundStaircaseInput
+    total = 0.0
+    for seed in seeds:
+        t, th, _, _, sigma, _ = _draw(seed)
+        start = time.process_time()
+        FoundStaircaseInput().fit(t, th, sigma)
+        total += time.process_time() - start
+    return total
+
+
+def _pairs(other: str, seeds: list[int], pairs: int) -> None:
+    """The search of this checkout against that of ``other``, in fresh processes taken in
+    turn, ``pairs`` times: each side's CPU over the seeds and the median ratio."""
+    import subprocess
+    cmd = [sys.executable, __file__, "--first", str(seeds[0]), "--n", str(len(seeds)),
+           "--cpu-only", "--code"]
+    ratios = []
+    for _ in range(pairs):
+        cpu = [float(subprocess.run(cmd + [code], capture_output=True, text=True, check=True)
+                     .stdout.split()[-1]) for code in (other, str(ROOT))]
+        ratios.append(cpu[0] / cpu[1])
+        print(f"  {other}: {cpu[0]:.1f} s, this checkout: {cpu[1]:.1f} s", flush=True)
+    print(f"seeds {seeds[0]}-{seeds[-1]}, {pairs} pairs: this checkout's search takes "
+          f"{float(np.median(ratios)):.2f}x less CPU (median ratio)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--first", type=int, default=0, help="first seed")
     ap.add_argument("--n", type=int, default=24, help="records")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--against", default=None, metavar="DIR",
+                    help="time the search against that of another checkout (e.g. 'git "
+                         "worktree add DIR COMMIT'), in alternated pairs; nothing else is run")
+    ap.add_argument("--pairs", type=int, default=3, help="pairs with --against")
+    ap.add_argument("--code", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--cpu-only", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     seeds = list(range(args.first, args.first + args.n))
+    if args.cpu_only:
+        print(f"{_search_cpu(seeds):.3f}")
+        return 0
+    if args.against:
+        _pairs(args.against, seeds, args.pairs)
+        return 0
     if args.jobs > 1:
         with Pool(args.jobs) as pool:
             rows = pool.map(_one, seeds, chunksize=1)
