@@ -27,11 +27,11 @@ SIGMA = 1.5e-4      # tracking noise of theta [rad] (0.015 px on a 100 px CD mar
 N_FRAMES = 2048     # 0.68 s, as the benchmark family's records
 
 
-def _record(seed: int, rounding: str, per_frame: int = 1):
+def _record(seed: int, rounding: str, per_frame: int = 1, fps: float = FPS):
     """(t, theta measured, true omega_dot, DriveSpec) of a twin staircase drive whose whole
     staircase is in the record (the report's protocol): 6-14 steps of 1 Hz over 0.3-0.55 s,
-    the loop, lag, setpoint weight and filter drawn as the benchmark family draws them; the
-    controller at the frame rate, or ``per_frame`` times it."""
+    the loop, lag, setpoint weight and filter drawn as the benchmark family draws them, 0.68
+    s at ``fps`` frames/s; the controller at the frame rate, or ``per_frame`` times it."""
     from twin.drives import DriveSpec, rotor_mu_req
     rng = np.random.default_rng([seed, 2718])
     u = rng.uniform
@@ -41,7 +41,7 @@ def _record(seed: int, rounding: str, per_frame: int = 1):
                      tau_motor=u(0.0, 0.03), zeta=u(0.6, 1.0), omega_n=u(8.0, 30.0),
                      setpoint_weight=u(0.5, 1.0),
                      setpoint_tau=0.0 if u() < 0.4 else u(0.002, 0.02))
-    fine = np.arange(N_FRAMES * per_frame) / (FPS * per_frame)
+    fine = np.arange(int(N_FRAMES * fps / FPS) * per_frame) / (fps * per_frame)
     r = {k: v[::per_frame] for k, v in rotor_mu_req(spec, fine).items()}
     t = fine[::per_frame]
     lens = 4e-4 * np.cos(r["theta"] + u(0, TWO_PI))
@@ -128,6 +128,45 @@ def test_a_fast_staircase_whose_continuous_te_is_biased_is_found():
         assert abs(p["staircase_te_s"] / spec.te - 1.0) < 0.003, (seed, p["staircase_te_s"])
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_controller_faster_than_the_camera_is_found_with_its_sample_time(seed):
+    """A 10 kHz controller filmed at 5000 frames/s, nothing stated: the frame interval is
+    refused, the other candidate sample times are ranked by their best assignment of steps
+    to samples, and 1e-4 s is found and accepted, the staircase the drive's. (Ranked by the
+    continuous fit's steps and fitted without step 4, as before, both records are refused.)"""
+    t, th, _, spec = _record(seed, "lead", per_frame=2, fps=5000.0)
+    fit = FoundStaircaseInput().fit(t, th, SIGMA)
+    assert fit.accepted, (seed, fit.why)
+    p = fit.params
+    assert p["controller_sample_time_s"] == pytest.approx(1e-4, rel=1e-9)
+    span = abs(spec.omega_end - spec.omega0) / spec.step
+    assert p["staircase_steps"] == math.floor(span)
+    assert p["staircase_rounding_offset"] == ROUNDING_OFFSETS["lead"]
+    assert abs(p["staircase_te_s"] / spec.te - 1.0) < 0.003, (seed, p["staircase_te_s"])
+
+
+def test_step_2s_fit_at_the_noise_ends_the_search_where_the_frame_interval_is_refused(
+        monkeypatch):
+    """A 30 kHz controller (next to continuous): where the frame interval's fit is refused
+    and step 2's continuous fit on all samples is at the noise, that fit is the result; the
+    other sample times are not fitted (each costs seconds)."""
+    from measurement.kinematics import staircase_search
+    from measurement.kinematics.model_fit import DriveFit
+    t, th, _, spec = _record(9103, "nearest", per_frame=10)
+    refused = DriveFit(False, "refused (test)", params={"zeta": 0.7})
+
+    def not_called(*a, **k):
+        raise AssertionError("the other sample times were fitted")
+
+    monkeypatch.setattr(FoundStaircaseInput, "_stepped", lambda *a, **k: refused)
+    monkeypatch.setattr(FoundStaircaseInput, "_other_sample_times", not_called)
+    fit = FoundStaircaseInput().fit(t, th, SIGMA)
+    assert fit.accepted, fit.why
+    assert fit.params["controller_sample_time_s"] == 0.0
+    assert fit.rms_ratio <= staircase_search.GOOD_ENOUGH_RMS
+    assert abs(fit.params["staircase_te_s"] / spec.te - 1.0) < 0.01
+
+
 def test_an_accepted_continuous_fit_stands_where_every_digital_fit_is_refused(monkeypatch):
     """Step 2's continuous fit of the staircase's timing with the loop is a result of its
     own: where it passes the tests on all samples and steps 3-4 refuse every sample time,
@@ -141,6 +180,8 @@ def test_an_accepted_continuous_fit_stands_where_every_digital_fit_is_refused(mo
     refused = DriveFit(False, "every controller sample time tried was refused (test)")
     monkeypatch.setattr(FoundStaircaseInput, "_loop_fit", lambda *a, **k: refused)
     monkeypatch.setattr(FoundStaircaseInput, "_stepped", lambda *a, **k: refused)
+    # no fit counts as at the noise, so the search's shortcut for one does not return it
+    monkeypatch.setattr(staircase_search, "GOOD_ENOUGH_RMS", 0.0)
     fit = FoundStaircaseInput().fit(t, th, SIGMA)
     assert fit.accepted, fit.why
     assert fit.params["controller_sample_time_s"] == 0.0
