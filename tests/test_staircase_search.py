@@ -145,6 +145,27 @@ def test_a_controller_faster_than_the_camera_is_found_with_its_sample_time(seed)
     assert abs(p["staircase_te_s"] / spec.te - 1.0) < 0.003, (seed, p["staircase_te_s"])
 
 
+@pytest.mark.parametrize("seed, rounding, dn", [(9102, "lead", -1), (9103, "nearest", 1),
+                                                (9107, "trail", -1)])
+def test_a_step_count_one_off_in_every_grid_cell_is_mended(monkeypatch, seed, rounding, dn):
+    """Every staircase the grid scores has one step fewer (dn -1) or more (+1) than the
+    drive's: step 2's best fit is then beyond the acceptance limit, and the same staircase
+    refitted from it with one step more (fewer) is the drive's, accepted (te within 0.3 %).
+    Without that refit the records are refused. (From one step more it is not always
+    mended: 1 of 3 of these records; in the benchmark family's refusals the count was one
+    off either way.)"""
+    from measurement.kinematics import staircase_search
+    t, th, _, spec = _record(seed, rounding)
+    n_true = math.floor(abs(spec.omega_end - spec.omega0) / spec.step)
+    real = staircase_search.candidate_staircases
+    monkeypatch.setattr(staircase_search, "candidate_staircases", lambda *a: [
+        s for s in real(*a) if s.n == n_true + dn and s.rounding == rounding])
+    fit = FoundStaircaseInput(sample_time_s=1.0 / FPS).fit(t, th, SIGMA)
+    assert fit.accepted, fit.why
+    assert fit.params["staircase_steps"] == n_true
+    assert abs(fit.params["staircase_te_s"] / spec.te - 1.0) < 0.003
+
+
 def test_step_2s_fit_at_the_noise_ends_the_search_where_the_frame_interval_is_refused(
         monkeypatch):
     """A 30 kHz controller (next to continuous): where the frame interval's fit is refused

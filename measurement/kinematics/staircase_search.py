@@ -11,9 +11,11 @@ report sec. 4.2) but not its figures on the camera's clock, and has not identifi
    :mod:`measurement.kinematics.unknown_loop` over the staircase, its duration te and span s
    [steps] fitted with the time offset and the loop, from the grid's best cells (the first at
    the noise ends it; up to six where none of the first three is within the acceptance
-   limit), on every third sample, the best then on all. A digital controller's sampling is
-   left out here: it makes the step times, and so the residual, piecewise constant in te and
-   s, which least squares cannot follow.
+   limit), on every third sample, the best then on all; where the best is beyond the
+   acceptance limit, its staircase with a step fewer and one more is fitted from it too (the
+   count can be one off with every other figure near the drive's). A digital controller's
+   sampling is left out here: it makes the step times, and so the residual, piecewise
+   constant in te and s, which least squares cannot follow.
 3. **The loop over that staircase** as :mod:`.unknown_loop` fits it for a stated staircase,
    from step 2's loop first.
 4. **Which sample each step fell on** (:mod:`measurement.kinematics.step_assignment`, a
@@ -165,6 +167,8 @@ def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, step_rad_s: f
             break
     if best is None:
         return None
+    if _key(best[0])[1] > settings.max_rms_ratio:
+        best = _neighbour_counts(t, th, sigma, best, settings)
     q, stair = best[0].params, best[1].stair
     model = _SineModel(time, _drive_of(q), stair, q["staircase_te_s"],
                        q["staircase_span_steps"], settings, q["t_off_s"])
@@ -176,6 +180,29 @@ def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, step_rad_s: f
     q = fit.params
     return _Found(replace(stair, t0_s=stair.t0_s + q["t_off_s"]), q["staircase_te_s"],
                   q["staircase_span_steps"], fit, use_full)
+
+
+def _neighbour_counts(t: np.ndarray, th: np.ndarray, sigma: float,
+                      best: tuple[DriveFit, _SineModel], settings: DriveModelSettings
+                      ) -> tuple[DriveFit, _SineModel]:
+    """Step 2's best fit and the same staircase with one step fewer and one more (its
+    rounding, te, loop and offset as fitted), the best of the three. Where the residual is
+    beyond the acceptance limit, the step count can be one off with every other figure near
+    the drive's; the grid's cells of the right count started elsewhere (seeds 0, 27 and 1000
+    of bench_staircase_search.py: 11 steps for 12, 12 for 11, 11 for 10)."""
+    fit, model = best
+    q, stair = fit.params, model.stair
+    for dn in (-1, 1):
+        n = stair.n + dn
+        if n < 2:
+            continue
+        span = min(max(q["staircase_span_steps"] + dn, n + 1e-3), n + 1.0 - 1e-3)
+        other = _SineModel(t, _drive_of(q), replace(stair, n=n), q["staircase_te_s"], span,
+                           settings, q["t_off_s"])
+        moved = fit_model(t, th, other, sigma, settings)
+        if "staircase_te_s" in moved.params and _key(moved) < _key(best[0]):
+            best = (moved, other)
+    return best
 
 
 @dataclass(frozen=True)
