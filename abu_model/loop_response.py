@@ -28,11 +28,17 @@ re-exports it with the python-control transfer functions.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
+
+try:   # the compiled kernel (setup.py; optional: without a C compiler the NumPy path runs)
+    from abu_model import _loopc
+except ImportError:   # pragma: no cover - depends on the build
+    _loopc = None
 
 #: Relative separation below which two poles count as repeated; they are then split by this
 #: much (the residue formula needs simple poles; the response changes by ~1e-7 relative).
@@ -42,6 +48,9 @@ import numpy as np
 _SPLIT = 1e-7
 #: A setpoint filter faster than this [s] is none (its pole would not be representable).
 _NO_FILTER_S = 1e-7
+#: A setpoint filter's pole closer than this (relative) to one of the loop's is found with
+#: them as a root of the whole denominator (:func:`modes`).
+_NEAR_FILTER = 1e-3
 
 
 @dataclass(frozen=True)
@@ -100,25 +109,60 @@ def loop_polynomials(zeta: float, omega_n: float, tau: float = 0.0, weight: floa
 def modes(zeta: float, omega_n: float, tau: float = 0.0, weight: float = 1.0,
           setpoint_tau: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Poles p_i [1/s] and step-response residues c_i [-] of the loop (complex arrays, not
-    to be modified: cached)."""
-    num, den = loop_polynomials(zeta, omega_n, tau, weight, setpoint_tau)
-    # np.roots' companion matrix, built here: the fits call this with new parameters at every
-    # evaluation, and np.roots' checks cost as much as the eigenvalues (den has no zero
-    # coefficient at either end: omega_n > 0 and a positive leading one)
-    companion = np.diag(np.ones(den.size - 2), -1)
-    companion[0, :] = -den[1:] / den[0]
-    poles = np.asarray(np.linalg.eigvals(companion), dtype=complex)
-    scale = float(np.max(np.abs(poles)))
+    to be modified: cached).
+
+    The fits call this with new parameters at every evaluation, so it works on Python
+    complex numbers (NumPy's per-call overhead on arrays of 2-4 was most of its cost): the
+    loop's poles in closed form without a lag (the quadratic's cancellation-free form), the
+    cubic's from its companion matrix with one (as np.roots, without its checks), and the
+    setpoint filter's pole -1/tau_f."""
+    num, den = loop_polynomials(zeta, omega_n, tau, weight, 0.0)
+    poles = list(_loop_poles(zeta, omega_n, tau))
+    lead = float(den[0])
+    if setpoint_tau > _NO_FILTER_S:
+        lead *= setpoint_tau
+        poles.append(complex(-1.0 / setpoint_tau))
+        if min(abs(poles[-1] - v) for v in poles[:-1]) < _NEAR_FILTER * abs(poles[-1]):
+            # the filter on (or next to) a loop pole, maybe a double one: the whole
+            # denominator's roots, which come apart by ~eps^(1/m) (a split by _SPLIT of a
+            # triple pole would lose 1e-3 of alpha in the residues' cancellation)
+            poles = _roots(loop_polynomials(zeta, omega_n, tau, weight, setpoint_tau)[1])
+    scale = max(abs(v) for v in poles)
     for i in range(len(poles)):
         for j in range(i):
             if abs(poles[i] - poles[j]) < _SPLIT * scale:
                 poles[i] += _SPLIT * scale * (1 + i)
     # D'(p) from the (possibly split) poles: lead * prod_{j != i} (p_i - p_j)
-    gaps = poles[:, None] - poles[None, :]
-    np.fill_diagonal(gaps, 1.0)
-    dprime = den[0] * gaps.prod(axis=1)
-    residues = np.polyval(num, poles) / (poles * dprime)
-    return poles, residues
+    residues = []
+    for i, p_i in enumerate(poles):
+        dprime = lead
+        for j, p_j in enumerate(poles):
+            if j != i:
+                dprime *= p_i - p_j
+        residues.append((float(num[0]) * p_i + float(num[1])) / (p_i * dprime))
+    return np.array(poles, dtype=complex), np.array(residues, dtype=complex)
+
+
+@lru_cache(maxsize=64)   # a fit's Jacobian moves the weight and the filter alone too
+def _loop_poles(zeta: float, omega_n: float, tau: float) -> tuple[complex, ...]:
+    """The PI loop's poles without the setpoint filter (the weight does not move them)."""
+    if tau > 0:
+        return tuple(_roots(np.array([tau, 1.0, 2.0 * zeta * omega_n, omega_n**2])))
+    disc = zeta * zeta - 1.0
+    if disc >= 0.0:
+        big = -omega_n * (zeta + math.sqrt(disc))
+        return complex(big), complex(omega_n * omega_n / big)
+    im = omega_n * math.sqrt(-disc)
+    return complex(-zeta * omega_n, im), complex(-zeta * omega_n, -im)
+
+
+def _roots(den: np.ndarray) -> list[complex]:
+    """Roots of the polynomial ``den`` (highest power first): np.roots' companion matrix,
+    built here without its checks (den has no zero coefficient at either end: omega_n > 0 and
+    a positive leading one)."""
+    companion = np.diag(np.ones(den.size - 2), -1)
+    companion[0, :] = -den[1:] / den[0]
+    return [complex(v) for v in np.linalg.eigvals(companion)]
 
 
 @dataclass
@@ -141,6 +185,23 @@ def response(setpoints: Setpoints, t: Sequence[float] | np.ndarray, zeta: float,
     """
     t = np.asarray(t, dtype=float)
     poles, res = modes(zeta, omega_n, tau, weight, setpoint_tau)
+    if _loopc is not None and t.ndim == 1 and t.size:
+        t_c = np.ascontiguousarray(t)
+        out = np.empty((3, t.size))
+        try:
+            _loopc.response(t_c, np.asarray(setpoints.step_times, dtype=float),
+                            np.diff(np.asarray(setpoints.levels, dtype=float)), poles, res,
+                            float(setpoints.levels[0]), need_theta, *out)
+            return LoopResponse(t, out[1], out[2], out[0] if need_theta else np.empty(0))
+        except ValueError:   # times not increasing or not finite: the reference below
+            pass
+    return _response_numpy(setpoints, t, poles, res, need_theta)
+
+
+def _response_numpy(setpoints: Setpoints, t: np.ndarray, poles: np.ndarray, res: np.ndarray,
+                    need_theta: bool) -> LoopResponse:
+    """The NumPy reference of :func:`response` (times in any order), the compiled kernel's
+    (``_loopc.c``) check in tests/test_loop_kernel.py."""
     tk = np.asarray(setpoints.step_times, dtype=float)
     levels = np.asarray(setpoints.levels, dtype=float)
     dw = np.diff(levels)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +40,8 @@ from controller.drive import UPPER, Drive
 
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import (STEP_BIN_S, STEP_WINDOW_S, DriveFit,
-                                              DriveModelSettings, fit_model, linear_basis,
-                                              solve)
+                                              DriveModelSettings, fit_model, forward_jacobian,
+                                              linear_basis, solve)
 
 #: loop parameters: (file name, Drive attribute, lower bound)
 LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
@@ -81,6 +82,7 @@ class LoopModel:
                  settings: DriveModelSettings, t_off_s: float = 0.0):
         self.t, self.sp = time, sampled(setpoints, drive.sample_time)
         self.sample_time = drive.sample_time
+        self._last: tuple[bytes | None, Any] = (None, None)   # evaluate's last (p, outputs)
         self.names = ["t_off_s"]
         self.x0 = [t_off_s]
         self.lo = [-settings.t_off_max_s]
@@ -161,10 +163,23 @@ class LoopModel:
 
     def evaluate(self, p: np.ndarray, need_theta: bool = True):
         """(Theta, omega, omega_dot) of the loop alone (no linear terms) at the frame times."""
+        key = p.tobytes()
+        if need_theta and self._last[0] == key:
+            return self._last[1]   # the least squares asks for the Jacobian where it just was
         zeta, wn, tau, b, tau_f = self.loop(p)
         r = response(self.setpoints_for(p), self.t - p[0], zeta, wn, tau, b, need_theta,
                      setpoint_tau=tau_f)
-        return (r.theta if need_theta else None), r.omega, r.alpha
+        out = (r.theta if need_theta else None), r.omega, r.alpha
+        if need_theta:
+            self._last = (key, out)
+        return out
+
+    def theta_jacobian(self, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """d Theta / d p at the frame times: the time offset's column in closed form (-omega:
+        Theta is a function of t - t_off), the others by forward differences
+        (:func:`~measurement.kinematics.model_fit.forward_jacobian`)."""
+        _, omega, _ = self.evaluate(p)
+        return forward_jacobian(self, p, lo, hi, {0: -omega})
 
 
 def fit_drive_model(time: np.ndarray, theta: np.ndarray, drive: Drive, setpoints: Setpoints, *,

@@ -183,15 +183,24 @@ def solve(t: np.ndarray, th: np.ndarray, model: Any, sigma: float, st: DriveMode
     prior_c = np.array([c for _, c, _ in model.prior])
     prior_s = np.array([s for _, _, s in model.prior])
 
+    lo, hi = np.array(model.lo, float), np.array(model.hi, float)
+    prior_rows = np.zeros((prior_idx.size, lo.size))
+    prior_rows[np.arange(prior_idx.size), prior_idx] = 1.0 / prior_s
+
     def residuals(p: np.ndarray) -> np.ndarray:
         e = th - model.evaluate(p)[0]
         r = (e - basis @ (proj @ e)) / sigma
         return np.concatenate([r, (p[prior_idx] - prior_c) / prior_s]) if prior_idx.size else r
 
-    lo, hi = np.array(model.lo), np.array(model.hi)
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        g = model.theta_jacobian(p, lo, hi)
+        return np.vstack([(basis @ (proj @ g) - g) / sigma, prior_rows])
+
     x0 = np.clip(np.array(model.x0, float), lo + 1e-9, hi - 1e-9)
+    # a model that knows its own Jacobian (the loop's, :mod:`.drive_model`) gives it
     sol = least_squares(residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
-                        max_nfev=max_evaluations)
+                        max_nfev=max_evaluations,
+                        jac=jacobian if hasattr(model, "theta_jacobian") else "2-point")
     return sol, basis, proj
 
 
@@ -266,6 +275,33 @@ def linear_basis(t: np.ndarray, theta: np.ndarray, harmonics: int) -> np.ndarray
     for k in range(1, harmonics + 1):
         cols += [np.cos(k * theta), np.sin(k * theta)]
     return np.column_stack(cols)
+
+
+#: Forward-difference step of :func:`forward_jacobian` relative to max(1, |p|) (SciPy's for
+#: '2-point').
+FD_STEP = float(np.finfo(float).eps) ** 0.5
+
+
+def forward_jacobian(model: Any, p: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                     exact: dict[int, np.ndarray]) -> np.ndarray:
+    """d Theta / d p at the frame times, (frames, parameters): the columns in ``exact`` as
+    given (a model's closed forms), the others by forward differences of ``model.evaluate``
+    with SciPy's '2-point' steps (turned back where a bound is in the way). A model with
+    such a ``theta_jacobian`` saves an evaluation a closed-form column at every iteration of
+    :func:`solve`, and those columns (the time offset's: the most sensitive) are exact."""
+    theta = model.evaluate(p)[0]
+    h = FD_STEP * np.where(p >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(p))
+    h = np.where((p + h > hi) | (p + h < lo), -h, h)
+    h = (p + h) - p   # the step as the sum rounds it
+    jac = np.empty((theta.size, p.size))
+    for i in range(p.size):
+        if i in exact:
+            jac[:, i] = exact[i]
+            continue
+        up = p.copy()
+        up[i] += h[i]
+        jac[:, i] = (model.evaluate(up)[0] - theta) / h[i]
+    return jac
 
 
 def output_jacobian(model: Any, p: np.ndarray
