@@ -67,3 +67,35 @@ def test_the_drives_own_assignment_scores_best_against_its_loop():
     # step for step, but for a shift common to all (the time offset's, fitted after)
     d = chosen.times_s - np.asarray(drive.step_times)
     assert np.ptp(d) < 1e-9 and abs(d[0]) <= 3 * period, d
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_quick_scores_equal_the_direct_residuals(seed):
+    """quick_scores (the loop's linearity: one response per distinct sample) against each
+    assignment's own response and projection (_sse_off of _theta, the scoring before it): the
+    same sums to 1e-8 relative and the same best row, on random staircases, loops (lag and
+    setpoint filter or none), sample times at and below the frame interval and a box of rows
+    up to two samples either way of a drive's."""
+    from abu_model.loop_response import Setpoints
+    from measurement.kinematics import step_assignment as sa
+    rng = np.random.default_rng([seed, 31])
+    fps = float(rng.choice([2000.0, 4500.0]))
+    t = np.arange(int(rng.uniform(500, 3000))) / fps
+    period = float(rng.choice([1.0, 0.5, 0.2])) / fps
+    n = int(rng.integers(3, 12))
+    levels = tuple(rng.uniform(-100, 100) + np.arange(n + 1) * TWO_PI * rng.choice([-1, 1]))
+    drive_k = np.ceil(np.sort(rng.uniform(0.02, 0.8 * t[-1], n)) / period)
+    rows = np.unique(drive_k[None, :] + rng.integers(-2, 3, (300, n)), axis=0)
+    rows = rows[np.all(np.diff(rows, axis=1) > 0, axis=1)]
+    p = np.array([rng.uniform(-1e-3, 1e-3), rng.uniform(0.5, 1.0), rng.uniform(8, 40),
+                  rng.choice([0.0, rng.uniform(0, 0.01)]), rng.uniform(0.5, 1.0),
+                  rng.choice([0.0, rng.uniform(0, 0.01)])])
+
+    def at(k):
+        return Setpoints(tuple(np.multiply(k, period).tolist()), levels)
+    theta = sa._theta(at(rows[0]), t, p) + 1e-4 * rng.standard_normal(t.size) + 0.3
+    _, q = sa._design(t, at(rows[rows.shape[0] // 2]), p, sa.linear_basis(t, theta, 3))
+    direct = np.array([sa._sse_off(theta - sa._theta(at(k), t, p), q) for k in rows])
+    quick = sa.quick_scores(t, theta, rows, period, levels, p, q)
+    assert np.max(np.abs(quick - direct) / direct) < 1e-8
+    assert int(np.argmin(quick)) == int(np.argmin(direct))
