@@ -213,7 +213,7 @@ def _response_numpy(setpoints: Setpoints, t: np.ndarray, poles: np.ndarray, res:
         gap = tk[j] - tk[j - 1] if j else 0.0
         Z[j + 1] = Z[j] * np.exp(poles * gap) + dw[j]
     # before the first step z = 0 (no exp of a time before it: it could overflow)
-    since = np.where(k > 0, t - tk[np.maximum(k - 1, 0)], 0.0)
+    since = np.where(k > 0, t - tk[np.maximum(k - 1, 0)], 0.0) if tk.size else np.zeros_like(t)
     z = (Z[k] * np.exp(np.outer(since, poles))).view(np.float64)   # (times, 2 poles) reals
     omega = level + _real_sum(z, res)
     alpha = _real_sum(z, res * poles)

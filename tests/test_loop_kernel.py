@@ -66,6 +66,17 @@ def test_kernel_matches_the_reference(seed):
     assert fast.theta.size == 0 and np.array_equal(fast.alpha, got.alpha)
 
 
+def test_a_constant_setpoint_holds_its_level():
+    """No steps (a setpoint held throughout): omega at the level, alpha 0, theta its ramp, in
+    the kernel and the reference alike."""
+    sp = L.Setpoints((), (-40.0,))
+    t = np.arange(100) / 1000.0
+    for r in (L.response(sp, t, 0.7, 20.0, 0.01, 0.8, setpoint_tau=0.005),
+              L._response_numpy(sp, t, *L.modes(0.7, 20.0, 0.01, 0.8, 0.005), True)):
+        assert np.allclose(r.omega, -40.0) and np.allclose(r.alpha, 0.0)
+        assert np.allclose(r.theta, -40.0 * t)
+
+
 @needs_kernel
 def test_times_in_any_order_or_not_finite_take_the_reference():
     """The kernel walks increasing times; others go to the reference (same values), with no
