@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -40,8 +39,8 @@ from controller.drive import UPPER, Drive
 
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import (STEP_BIN_S, STEP_WINDOW_S, DriveFit,
-                                              DriveModelSettings, fit_model, forward_jacobian,
-                                              linear_basis, solve)
+                                              DriveModelSettings, LastEvaluation, fit_model,
+                                              forward_jacobian, linear_basis, solve)
 
 #: loop parameters: (file name, Drive attribute, lower bound)
 LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
@@ -66,7 +65,7 @@ class DriveModelInput:
                                sigma_theta=sigma_theta, settings=self.settings)
 
 
-class LoopModel:
+class LoopModel(LastEvaluation):
     """theta, omega, omega_dot of the parametrised drive at the frame times: the model that
     :func:`~measurement.kinematics.model_fit.fit_model` fits (``names``, ``x0``, ``lo``, ``hi``,
     ``prior``, :meth:`evaluate`; :meth:`step_frames` and :meth:`step_sigma` for the tests and
@@ -82,7 +81,6 @@ class LoopModel:
                  settings: DriveModelSettings, t_off_s: float = 0.0):
         self.t, self.sp = time, sampled(setpoints, drive.sample_time)
         self.sample_time = drive.sample_time
-        self._last: tuple[bytes | None, Any] = (None, None)   # evaluate's last (p, outputs)
         self.names = ["t_off_s"]
         self.x0 = [t_off_s]
         self.lo = [-settings.t_off_max_s]
@@ -161,18 +159,12 @@ class LoopModel:
         return (v["zeta"], v["omega_n_rad_s"], v.get("tau_motor_s", 0.0),
                 v.get("setpoint_weight", 1.0), v.get("setpoint_tau_s", 0.0))
 
-    def evaluate(self, p: np.ndarray, need_theta: bool = True):
+    def _evaluate(self, p: np.ndarray, need_theta: bool = True):
         """(Theta, omega, omega_dot) of the loop alone (no linear terms) at the frame times."""
-        key = p.tobytes()
-        if need_theta and self._last[0] == key:
-            return self._last[1]   # the least squares asks for the Jacobian where it just was
         zeta, wn, tau, b, tau_f = self.loop(p)
         r = response(self.setpoints_for(p), self.t - p[0], zeta, wn, tau, b, need_theta,
                      setpoint_tau=tau_f)
-        out = (r.theta if need_theta else None), r.omega, r.alpha
-        if need_theta:
-            self._last = (key, out)
-        return out
+        return (r.theta if need_theta else None), r.omega, r.alpha
 
     def theta_jacobian(self, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """d Theta / d p at the frame times: the time offset's column in closed form (-omega:

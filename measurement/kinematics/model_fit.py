@@ -277,6 +277,24 @@ def linear_basis(t: np.ndarray, theta: np.ndarray, harmonics: int) -> np.ndarray
     return np.column_stack(cols)
 
 
+class LastEvaluation:
+    """Mixin of the drive models: :meth:`evaluate` remembers its last parameters and outputs
+    (with theta), which :func:`solve`'s least squares asks for again for the Jacobian where
+    it just evaluated the residual. A model defines ``_evaluate(p, need_theta)``."""
+
+    _last: tuple[bytes | None, Any] = (None, None)
+
+    def evaluate(self, p: np.ndarray, need_theta: bool = True):
+        """(Theta, omega, omega_dot) of the model at the frame times (``_evaluate``'s)."""
+        key = p.tobytes()
+        if need_theta and self._last[0] == key:
+            return self._last[1]
+        out = self._evaluate(p, need_theta)
+        if need_theta:
+            self._last = (key, out)
+        return out
+
+
 #: Forward-difference step of :func:`forward_jacobian` relative to max(1, |p|) (SciPy's for
 #: '2-point').
 FD_STEP = float(np.finfo(float).eps) ** 0.5

@@ -20,7 +20,6 @@ PI loop (``--kinematics drive-model``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -28,8 +27,8 @@ from abu_model.tracking_response import response
 from controller.drive import UPPER, Drive
 from controller.profile import Profile
 
-from measurement.kinematics.model_fit import (DriveFit, DriveModelSettings, fit_model,
-                                              forward_jacobian)
+from measurement.kinematics.model_fit import (DriveFit, DriveModelSettings, LastEvaluation,
+                                              fit_model, forward_jacobian)
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 
 #: the gain's fitted range [-]
@@ -45,7 +44,7 @@ GAIN_RANGE = (0.5, 2.0)
 Z95 = 1.959964
 
 
-class _ProfileModel:
+class _ProfileModel(LastEvaluation):
     """theta, omega, omega_dot of the profile through the parametrised loop."""
 
     def __init__(self, time: np.ndarray, drive: Drive, profile: Profile,
@@ -57,7 +56,6 @@ class _ProfileModel:
         self.hi = [settings.t_off_max_s, GAIN_RANGE[1]]
         self.prior: list[tuple[int, float, float]] = []
         self.fixed_tau = float(drive.tau_motor)
-        self._last: tuple[bytes | None, Any] = (None, None)
         loop = [("bandwidth_rad_s", float(drive.bandwidth), 1e-2)]
         if drive.tau_motor > 0 or "tau_motor_s" in drive.ci95:
             loop.append(("tau_motor_s", float(drive.tau_motor), 0.0))
@@ -71,17 +69,11 @@ class _ProfileModel:
             self.lo.append(low)
             self.hi.append(UPPER[name])
 
-    def evaluate(self, p: np.ndarray, need_theta: bool = True):
+    def _evaluate(self, p: np.ndarray, need_theta: bool = True):
         """(g Theta, g omega, g omega_dot) of the loop alone at the frame times."""
-        key = p.tobytes()
-        if need_theta and self._last[0] == key:
-            return self._last[1]   # the least squares asks for the Jacobian where it just was
         tau = p[3] if len(p) > 3 else self.fixed_tau
         r = response(self.profile, self.t - p[0], p[2], tau, gain=p[1])
-        out = (r.theta if need_theta else None), r.omega, r.alpha
-        if need_theta:
-            self._last = (key, out)
-        return out
+        return (r.theta if need_theta else None), r.omega, r.alpha
 
     def theta_jacobian(self, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """d (g Theta) / d p: the time offset's column (-g omega) and the gain's (Theta) in
