@@ -376,14 +376,13 @@ def _refit(t: np.ndarray, th: np.ndarray, sigma: float, q: dict[str, float], fou
     """The loop fitted from ``q`` with the steps on ``chosen``'s samples of ``period`` [s]
     (None where the fit failed); its params hold the sine that gives them (the continuous
     fit's te is biased by the sampling by up to 0.4 %) and how many steps moved."""
-    levels = found.stair.setpoints(found.te_s, found.span_steps).levels
+    continuous = found.stair.setpoints(found.te_s, found.span_steps)
     moved = fit_drive_model(t, th, _drive_of(q, period),
-                            Setpoints(tuple(chosen.times_s.tolist()), levels),
+                            Setpoints(tuple(chosen.times_s.tolist()), continuous.levels),
                             sigma_theta=sigma, settings=settings, t_off_s=q["t_off_s"])
     if "zeta" not in moved.params:
         return None
-    start = np.asarray(sampled(found.stair.setpoints(found.te_s, found.span_steps),
-                               period).step_times)
+    start = np.asarray(sampled(continuous, period).step_times)
     moved.params = {**moved.params, **{k: v for k, v in q.items() if k not in moved.params},
                     "staircase_steps_moved": float(np.sum(np.abs(chosen.times_s - start)
                                                           > 0.5 * period))
