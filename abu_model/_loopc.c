@@ -18,8 +18,9 @@
  * Arguments: t, step times tk, step sizes dW (float64 buffers), poles p and residues c
  * (complex128 buffers, at most MAX_POLES), the level before the first step L0, need_theta,
  * and the outputs theta, omega, alpha (writable float64, len(t) each; theta untouched when
- * need_theta is 0). Times not increasing, or not finite, are refused (ValueError) before
- * anything is written: the caller then runs the reference (any order).
+ * need_theta is 0). Times or step times not increasing, or any input not finite, are refused
+ * (ValueError) before anything is written: the caller then runs the reference (any order,
+ * NaN propagated as NumPy does).
  *
  * A plain CPython extension (buffers through "y*" / "w*", no NumPy headers); the caller
  * passes C-contiguous arrays of the right dtypes (checked by size here).
@@ -63,6 +64,16 @@ static PyObject *response(PyObject *self, PyObject *args)
             PyErr_SetString(PyExc_ValueError, "_loopc: times not finite and increasing");
             goto done;
         }
+    }
+    for (Py_ssize_t j = 0; j < k_steps; j++) {
+        if (!isfinite(tk[j]) || !isfinite(dw[j]) || (j && tk[j] < tk[j - 1])) {
+            PyErr_SetString(PyExc_ValueError, "_loopc: steps not finite and increasing");
+            goto done;
+        }
+    }
+    if (!isfinite(level0)) {
+        PyErr_SetString(PyExc_ValueError, "_loopc: the first level is not finite");
+        goto done;
     }
     double complex z[MAX_POLES], e[MAX_POLES], cp[MAX_POLES], cq[MAX_POLES];
     double c_sum = 0.0;

@@ -92,6 +92,11 @@ def test_times_in_any_order_or_not_finite_take_the_reference():
     with np.errstate(invalid="ignore"):
         got = L.response(sp, with_nan, zeta, wn, tau, b, setpoint_tau=tau_f)
     assert np.isnan(got.omega[len(t) // 2])
+    # a level not finite: NaN out, no error
+    bad = L.Setpoints(sp.step_times, (np.nan,) + tuple(sp.levels[1:]))
+    with np.errstate(invalid="ignore"):
+        got = L.response(bad, t, zeta, wn, tau, b, setpoint_tau=tau_f)
+    assert np.all(np.isnan(got.omega))
 
 
 @needs_kernel
@@ -109,6 +114,15 @@ def test_bad_buffers_are_refused():
         KERNEL.response(t, tk, dw, p, c[:1], 0.0, True, *outs)
     with pytest.raises(ValueError):                          # decreasing times
         KERNEL.response(t[::-1].copy(), tk, dw, p, c, 0.0, True, *outs)
+    with pytest.raises(ValueError):                          # decreasing step times
+        KERNEL.response(t, tk[::-1].copy(), dw, p, c, 0.0, True, *outs)
+    for bad in (np.array([1.0, np.nan]), np.array([1.0, np.inf])):
+        with pytest.raises(ValueError):                      # a step time not finite
+            KERNEL.response(t, bad, dw, p, c, 0.0, True, *outs)
+        with pytest.raises(ValueError):                      # a step size not finite
+            KERNEL.response(t, tk, bad, p, c, 0.0, True, *outs)
+    with pytest.raises(ValueError):                          # the first level not finite
+        KERNEL.response(t, tk, dw, p, c, np.nan, True, *outs)
     with pytest.raises(TypeError):                           # an output not writable
         KERNEL.response(t, tk, dw, p, c, 0.0, True, b"x" * 80, outs[1], outs[2])
 
