@@ -280,3 +280,24 @@ def test_the_python_input_refuses_a_step_or_sample_time_that_makes_no_sense(kwar
     from abu_model.errors import ParameterError
     with pytest.raises(ParameterError, match=field):
         FoundStaircaseInput(**kwargs)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_timing_grid_interpolation_is_np_interp(seed):
+    """The timing grid's index arithmetic (_add_delayed: a response delayed on its own grid;
+    _on_grid: read at any positions) against np.interp with left=0 on the same grid: equal
+    to 1e-9 of the values, delays from 0 past the grid's end, positions before, inside and
+    past it."""
+    from measurement.kinematics.staircase_guess import _add_delayed, _on_grid
+    rng = np.random.default_rng([seed, 5])
+    du = 1.0 / rng.uniform(2000, 20000)
+    u = np.arange(int(rng.integers(50, 5000))) * du
+    h = np.cumsum(rng.standard_normal(u.size))
+    scale = float(np.max(np.abs(h)))
+    for delay in np.r_[0.0, 1.0, rng.uniform(0, 1.2 * u.size, 20)]:
+        out = np.zeros_like(u)
+        _add_delayed(out, h, delay)
+        ref = np.interp(u - delay * du, u, h, left=0.0)
+        assert np.max(np.abs(out - ref)) <= 1e-9 * scale, delay
+    x = rng.uniform(-0.2, 1.3, 2000) * u[-1]
+    assert np.max(np.abs(_on_grid(x / du, h) - np.interp(x, u, h, left=0.0))) <= 1e-9 * scale

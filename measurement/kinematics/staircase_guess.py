@@ -173,6 +173,8 @@ def _add_delayed(out: np.ndarray, h: np.ndarray, delay: float) -> None:
     the grid scores thousands of staircases)."""
     j = int(math.floor(delay))
     f = delay - j
+    if f == 0.0 and j < h.size:   # the delay on a grid point: h[0] there, as np.interp
+        out[j] += h[0]
     if j + 1 < h.size:
         out[j + 1:] += (1.0 - f) * h[1:h.size - j] + f * h[:h.size - j - 1]
 
