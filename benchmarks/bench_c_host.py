@@ -28,6 +28,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 REPO = Path(__file__).resolve().parents[1]
 SOURCE = REPO / "tests" / "c_host" / "abu_cosim_host.c"
 
@@ -98,8 +100,8 @@ def run_family(exe: Path, n: int, tmp: Path) -> bool:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=200)
-    ap.add_argument("--pairs", type=int, default=5)
+    ap.add_argument("--runs", type=positive_int, default=200)
+    ap.add_argument("--pairs", type=positive_int, default=5)
     ap.add_argument("--family", type=int, default=0)
     args = ap.parse_args()
 

@@ -21,6 +21,8 @@ import sys
 import tempfile
 import time
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 from fmpy.fmi2 import FMU2Slave
 from fmpy import read_model_description
 
@@ -105,7 +107,7 @@ def plain_master(exp: StaircaseExperiment, fmus: dict, h: float) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--pairs", type=int, default=12, help="alternating pairs (default 12)")
+    parser.add_argument("--pairs", type=positive_int, default=12, help="alternating pairs (default 12)")
     parser.add_argument("--tol", type=float, default=None,
                         help=f"coupling tolerance (default the master's, {DEFAULT_TOL:g})")
     parser.add_argument("--theta-ref", choices=["integral", "thesis"], default="integral")

@@ -18,6 +18,8 @@ import sys
 import tempfile
 import time
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 from abu_model.params import PlantParams
 from controller.drive import Drive
 from fmus.build import build_fmus
@@ -40,7 +42,7 @@ def _timed(fn):
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--pairs", type=int, default=3, help="timed pairs per range (default 3)")
+    parser.add_argument("--pairs", type=positive_int, default=3, help="timed pairs per range (default 3)")
     args = parser.parse_args(argv)
     peer_exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ)
     worst = 0.0

@@ -94,6 +94,8 @@ from dataclasses import replace
 from multiprocessing import Pool
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -559,7 +561,7 @@ def what_if_settings(error_rel: float | None, max_evaluations: int | None) -> No
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=1000, help="first seed")
-    ap.add_argument("--runs", type=int, default=72, help="rendered runs in all")
+    ap.add_argument("--runs", type=positive_int, default=72, help="rendered runs in all")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--rows", default=None, help="write the rows as JSON lines here")
     ap.add_argument("--design-args", default="", help="extra options of abu design")

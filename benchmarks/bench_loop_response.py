@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -37,7 +39,7 @@ def _per_call(fn, calls: int) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--pairs", type=int, default=7)
+    ap.add_argument("--pairs", type=positive_int, default=7)
     ap.add_argument("--calls", type=int, default=300)
     args = ap.parse_args(argv)
     if L._loopc is None:

@@ -25,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -90,7 +92,7 @@ def call_costs(native: Path, python: Path, tmp: Path, steps: int) -> tuple[float
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--pairs", type=int, default=12, help="alternating pairs (default 12)")
+    ap.add_argument("--pairs", type=positive_int, default=12, help="alternating pairs (default 12)")
     ap.add_argument("--steps", type=int, default=2000, help="steps per call-cost run")
     args = ap.parse_args(argv)
     exp = StaircaseExperiment(PlantParams(), -17 * HZ, -22 * HZ)

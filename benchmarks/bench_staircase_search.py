@@ -46,6 +46,8 @@ import time
 from multiprocessing import Pool
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 # --code DIR: the search of another checkout (the timing pairs of --against run this file so)
@@ -226,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--against", default=None, metavar="DIR",
                     help="time the search against that of another checkout (e.g. 'git "
                          "worktree add DIR COMMIT'), in alternated pairs; nothing else is run")
-    ap.add_argument("--pairs", type=int, default=3, help="pairs with --against")
+    ap.add_argument("--pairs", type=positive_int, default=3, help="pairs with --against")
     ap.add_argument("--code", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--cpu-only", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

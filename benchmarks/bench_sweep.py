@@ -28,6 +28,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
@@ -142,8 +144,8 @@ def memory(runs: int, budget_s: float, fmus: Path, work: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--pairs", type=int, default=3)
-    parser.add_argument("--runs", type=int, default=24)
+    parser.add_argument("--pairs", type=positive_int, default=3)
+    parser.add_argument("--runs", type=positive_int, default=24)
     parser.add_argument("--memory-runs", type=int, default=10_000)
     parser.add_argument("--budget-s", type=float, default=1200.0)
     parser.add_argument("--skip-throughput", action="store_true")

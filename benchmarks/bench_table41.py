@@ -20,6 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 HERE = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
@@ -45,7 +47,7 @@ def _time(tree: Path, fmu_dir: str) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", type=Path, default=None, help="older checkout to compare with")
-    parser.add_argument("--pairs", type=int, default=5, help="alternating pairs (default 5)")
+    parser.add_argument("--pairs", type=positive_int, default=5, help="alternating pairs (default 5)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         new_fmus, base_fmus = str(Path(tmp) / "new"), str(Path(tmp) / "base")

@@ -41,6 +41,8 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -135,7 +137,7 @@ def rms_error(x: np.ndarray, y: np.ndarray, truth: np.ndarray) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=3072)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=positive_int, default=3)
     ap.add_argument("--folder", action="store_true",
                     help="also time reading the recording as a folder of PNG files")
     args = ap.parse_args()

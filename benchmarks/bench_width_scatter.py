@@ -56,6 +56,8 @@ from dataclasses import replace
 from multiprocessing import Pool
 from pathlib import Path
 
+from bench_args import positive_int  # the scripts' folder is on sys.path
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -306,7 +308,7 @@ def main() -> None:
                          "instead of rendering it (same seeds, same options)")
     ap.add_argument("--cases", type=int, nargs="+", default=list(DEFAULT_CASES),
                     help="seeds of the population re-rendered")
-    ap.add_argument("--repeats", type=int, default=10,
+    ap.add_argument("--repeats", type=positive_int, default=10,
                     help="recordings per case and mode, the population's run included")
     ap.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -339,7 +340,14 @@ def test_measure_with_a_profile_and_no_drive_fits_the_tracking_loop(tmp_path, ca
 def test_the_printed_summary_says_where_the_kinematics_came_from():
     """The default's line points to the drive model; a refused fit's line gives the reason."""
     from measurement.report.summary_text import _kinematics_line
-    assert "--kinematics drive-model" in _kinematics_line({"name": "savgol", "window_s": 0.042})
+    hint = _kinematics_line({"name": "savgol", "window_s": 0.042})
+    assert "--kinematics drive-model" in hint and "--find-staircase" in hint
+    # every option the hint names is one of abu measure's
+    from abu.cli.main import build_parser
+    sub = build_parser("measure")._subparsers._group_actions[0].choices["measure"]
+    known = {o for a in sub._actions for o in a.option_strings}
+    named = set(re.findall(r"--[a-z][a-z-]*", hint))
+    assert named and named <= known, named - known
     refused = _kinematics_line({"name": "savgol", "model": "refused", "why": "rms 3 x"})
     assert "refused (rms 3 x)" in refused and "Savitzky-Golay used" in refused
     assert _kinematics_line({"name": "report"}) == ""

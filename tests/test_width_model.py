@@ -118,7 +118,10 @@ def test_design_and_next_outputs_carry_the_predicted_width(tmp_path, capsys):
 def _bench():
     import importlib.util
     from pathlib import Path
+    import sys
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_designed_runs.py"
+    if str(path.parent) not in sys.path:   # as the script runs: its folder on sys.path
+        sys.path.append(str(path.parent))
     spec = importlib.util.spec_from_file_location("bench_designed_runs", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -50,6 +50,20 @@ LOOP = (("zeta", "zeta", 1e-3), ("omega_n_rad_s", "omega_n", 1e-2),
 TIMING_SAMPLES = 1.0
 
 
+def fitted_loop(params: dict[str, float], sample_time_s: float | None, source: str,
+                min_tau_motor_s: float = 0.0) -> Drive:
+    """The PI loop of a fit's parameters (names of :data:`LOOP`) as a start for another fit,
+    digital with ``sample_time_s`` [s] (None: continuous). A setpoint filter fitted to 0
+    starts just above it (1e-4 s), and the torque lag at ``min_tau_motor_s`` at least: at 0
+    the model would drop the parameter, and the refit could not move it."""
+    return Drive(model="pi-lag-weighted", zeta=params["zeta"],
+                 omega_n=params["omega_n_rad_s"],
+                 tau_motor=max(params.get("tau_motor_s", 0.0), min_tau_motor_s),
+                 setpoint_weight=params.get("setpoint_weight", 1.0),
+                 setpoint_tau=max(params.get("setpoint_tau_s", 0.0), 1e-4),
+                 sample_time=sample_time_s, source=source)
+
+
 @dataclass(frozen=True)
 class DriveModelInput:
     """What the drive-model kinematics need: the identified loop, the staircase it was driven

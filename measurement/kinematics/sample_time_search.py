@@ -37,7 +37,7 @@ import numpy as np
 from abu_model.loop_response import Setpoints, sampled
 from controller.drive import Drive
 
-from measurement.kinematics.drive_model import quick_fit
+from measurement.kinematics.drive_model import fitted_loop, quick_fit
 from measurement.kinematics.estimators import sample_interval
 from measurement.kinematics.model_fit import DriveFit
 
@@ -84,12 +84,7 @@ def describe(period: float | None) -> str:
 def loop_drive(values: dict[str, float], period: float | None) -> Drive:
     """The staircase loop of fitted ``values`` (names of drive_model.LOOP) as a start,
     digital with ``period`` [s] (None: continuous)."""
-    # a filter fitted to 0 starts just above it: at 0 the model would drop the parameter
-    return Drive(model="pi-lag-weighted", zeta=values["zeta"],
-                 omega_n=values["omega_n_rad_s"], tau_motor=values.get("tau_motor_s", 0.0),
-                 setpoint_weight=values.get("setpoint_weight", 1.0),
-                 setpoint_tau=max(values.get("setpoint_tau_s", 0.0), 1e-4),
-                 sample_time=period, source="unknown loop: a warm start")
+    return fitted_loop(values, period, "unknown loop: a warm start")
 
 
 def find_sample_time(inp, time: np.ndarray, theta: np.ndarray,

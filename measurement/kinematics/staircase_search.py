@@ -54,7 +54,7 @@ import numpy as np
 from abu_model.loop_response import Setpoints, sampled
 from controller.drive import Drive
 
-from measurement.kinematics.drive_model import LoopModel, fit_drive_model
+from measurement.kinematics.drive_model import LoopModel, fit_drive_model, fitted_loop
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import DriveFit, DriveModelSettings, fit_model
 from measurement.kinematics.sample_time_search import candidates
@@ -118,13 +118,10 @@ def _at_noise(fit: DriveFit) -> bool:
 
 
 def _drive_of(params: dict[str, float], sample_time: float | None = None) -> Drive:
-    """The PI loop of a fit's parameters (a lag and a setpoint filter kept above 0, so that a
-    refit has them as parameters)."""
-    return Drive(model="pi-lag-weighted", zeta=params["zeta"], omega_n=params["omega_n_rad_s"],
-                 tau_motor=max(params.get("tau_motor_s", 0.0), 1e-5),
-                 setpoint_weight=params.get("setpoint_weight", 1.0),
-                 setpoint_tau=max(params.get("setpoint_tau_s", 0.0), 1e-4),
-                 sample_time=sample_time, source="the staircase found from the record")
+    """The PI loop of a fit's parameters (a lag kept above 0 too, so that a refit has it as
+    a parameter)."""
+    return fitted_loop(params, sample_time, "the staircase found from the record",
+                       min_tau_motor_s=1e-5)
 
 
 def _loop_vector(q: dict[str, float]) -> np.ndarray:

@@ -58,11 +58,13 @@ def describe_measurement(s: dict) -> str:
 def _kinematics_line(est: dict) -> str:
     """Where omega and omega_dot came from, and how to narrow the interval when they came from
     local smoothing (the default): the whole-record drive model, 1.8x narrower on the harsh
-    family whether the loop is identified or not (benchmarks/bench_width_floor.py)."""
+    family whether the loop is identified or not, and 1.7x with the staircase itself found
+    from the record (benchmarks/bench_width_floor.py --find-staircase, seeds 7000-7023)."""
     if est.get("name") == "savgol" and est.get("model") is None:
         return ("  kinematics: local Savitzky-Golay fit; to narrow the interval state the "
                 "staircase or profile the drive followed (--kinematics drive-model, with "
-                "--drive or without)")
+                "--drive or without), or, for one of the report's staircases whose figures "
+                "you do not know, add --find-staircase (a few seconds more)")
     if est.get("model") == "accepted":
         return f"  kinematics: the drive model over the whole record (loop {est.get('loop')})"
     if est.get("model") == "refused":
