@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -17,7 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from abu.cli.main import main as abu_main  # noqa: E402
 from measurement.kinematics.estimators import savgol_kinematics  # noqa: E402
 from measurement.kinematics.staircase_guess import (ROUNDING_OFFSETS,  # noqa: E402
-                                                    SineStaircase, progress, progress_root)
+                                                    SineStaircase, progress, progress_root,
+                                                    sine_guess)
 from measurement.kinematics.staircase_search import FoundStaircaseInput  # noqa: E402
 from test_unknown_loop import _tracks_csv  # noqa: E402
 
@@ -195,7 +197,7 @@ def test_an_accepted_continuous_fit_stands_where_every_digital_fit_is_refused(mo
     from measurement.kinematics import staircase_search
     from measurement.kinematics.model_fit import DriveFit
     t, th, _, spec = _record(9103, "nearest", per_frame=10)   # a 30 kHz controller
-    found = staircase_search._continuous(t, th, SIGMA, TWO_PI,
+    found = staircase_search._continuous(t, th, SIGMA, sine_guess(t, th), TWO_PI,
                                          FoundStaircaseInput().settings)
     assert found is not None and found.on_all_samples and found.fit.accepted, found
     refused = DriveFit(False, "every controller sample time tried was refused (test)")
@@ -208,6 +210,28 @@ def test_an_accepted_continuous_fit_stands_where_every_digital_fit_is_refused(mo
     assert fit.params["controller_sample_time_s"] == 0.0
     assert "(continuous) over the staircase found" in fit.loop
     assert abs(fit.params["staircase_te_s"] / spec.te - 1.0) < 0.01
+
+
+def test_a_step_too_small_for_the_search_is_refused_before_it_starts(monkeypatch):
+    """A setpoint step far below the drive's (0.05 Hz on a 6-14 Hz staircase: 120-280 steps)
+    is refused with the step count and the limit, before any fit (1000 steps took all of the
+    machine's memory before the limit): no timing grid is built."""
+    from measurement.kinematics import staircase_search
+    t, th, _, spec = _record(9104, "lead")
+    steps = abs(spec.omega_end - spec.omega0) / (0.05 * TWO_PI)
+
+    def no_grid(*a, **k):
+        raise AssertionError("the search started")
+    monkeypatch.setattr(staircase_search, "timing_grid", no_grid)
+    fit = FoundStaircaseInput(step_rad_s=0.05 * TWO_PI).fit(t, th, SIGMA)
+    assert not fit.accepted
+    assert f"at most {staircase_search.MAX_STEPS} steps" in fit.why
+    found = float(re.search(r"Hz, (\d+) steps of 0.05 Hz", fit.why).group(1))
+    assert abs(found / steps - 1.0) < 0.1, (found, steps)
+    # at the limit the search runs (here: a steps count within it, the drive's own)
+    monkeypatch.setattr(staircase_search, "MAX_STEPS", int(steps) + 2)
+    with pytest.raises(AssertionError, match="the search started"):
+        FoundStaircaseInput(step_rad_s=0.05 * TWO_PI).fit(t, th, SIGMA)
 
 
 def test_a_drive_that_is_no_staircase_is_refused():
@@ -280,6 +304,21 @@ def test_the_python_input_refuses_a_step_or_sample_time_that_makes_no_sense(kwar
     from abu_model.errors import ParameterError
     with pytest.raises(ParameterError, match=field):
         FoundStaircaseInput(**kwargs)
+
+
+def test_progress_root_is_the_same_element_by_element_and_vectorised():
+    """progress_root's two paths (Python floats for a staircase's few steps, NumPy for long
+    arrays) agree to 1e-15 on random values and near both ends, where p is cubic."""
+    from measurement.kinematics import staircase_guess
+    rng = np.random.default_rng(17)
+    y = np.r_[0.0, 1.0, 1e-15, 1.0 - 1e-15, rng.uniform(0, 1, 500), rng.uniform(0, 1e-5, 100),
+              1.0 - rng.uniform(0, 1e-5, 100)]
+    assert y.size > staircase_guess._SMALL
+    whole = progress_root(y)
+    pieces = np.concatenate([progress_root(y[i:i + 10]) for i in range(0, y.size, 10)])
+    assert np.max(np.abs(whole - pieces)) <= 1e-15
+    assert np.max(np.abs(progress(pieces) - y)) <= 1e-8
+    assert progress_root(np.array(0.3)).shape == ()
 
 
 @pytest.mark.parametrize("seed", range(10))

@@ -37,7 +37,8 @@ def add_drive_model_options(p: argparse.ArgumentParser) -> None:
                    help="with --kinematics drive-model and without --drive: the staircase the "
                         "drive followed (the report's inclined sine in steps of --step-hz) "
                         "found from the record, its start, duration, span and rounding fitted "
-                        "with the loop (4-40 s of CPU), instead of the staircase options "
+                        "with the loop (1-30 s of CPU, ~3 s typical; at most 100 steps), "
+                        "instead of the staircase options "
                         "(summary.json estimator.loop names the staircase found)")
     g = p.add_argument_group("staircase of the drive (with --kinematics drive-model)")
     g.add_argument("--omega0-hz", type=float, default=None, help="initial speed [Hz]")

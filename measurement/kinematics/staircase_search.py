@@ -58,8 +58,9 @@ from measurement.kinematics.drive_model import LoopModel, fit_drive_model, fitte
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import DriveFit, DriveModelSettings, fit_model
 from measurement.kinematics.sample_time_search import candidates
-from measurement.kinematics.staircase_guess import (SineStaircase, candidate_staircases,
-                                                    start_span, sine_guess, timing_grid)
+from measurement.kinematics.staircase_guess import (SineGuess, SineStaircase,
+                                                    candidate_staircases, start_span,
+                                                    sine_guess, timing_grid)
 from measurement.kinematics.step_assignment import Assignment, best_assignment
 from measurement.kinematics.unknown_loop import (FIND, GOOD_ENOUGH_RMS, UnknownLoopInput,
                                                  _free_settings, check_sample_time)
@@ -84,6 +85,13 @@ N_CANDIDATES = 6
 #: controller filmed at 5000/s: its 1e-4 s ranks first of seven by the assignment's
 #: residual, and was sixth of eight by the continuous fit's steps).
 N_PERIODS = 2
+#: The most steps a staircase found may have. Step 4's assignment box holds ~3 n^2 sample
+#: indices per duration and span, so the search's memory grows as the square of the step
+#: count: 1000 steps (--step-hz 0.01 on a 10 Hz record) took all of 24 GiB and the process
+#: was killed. Measured on true staircases of 3000 frames/s, 0.68 s: 30 steps 0.13 GB peak
+#: and 4-12 s of CPU, 80 steps 0.5 GB and 14-24 s, each found (the report's staircase has
+#: 10 steps; bench_staircase_search.py's family 4-16).
+MAX_STEPS = 100
 
 
 class _SineModel(LoopModel):
@@ -142,13 +150,10 @@ class _Found:
     on_all_samples: bool = False
 
 
-def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, step_rad_s: float,
-                settings: DriveModelSettings) -> _Found | None:
-    """Steps 1 and 2 of the module doc on every SEARCH_EVERY-th sample, then the best fitted
-    again on all of them."""
-    guess = sine_guess(time, theta)
-    if not abs(guess.span_rad_s) >= step_rad_s:
-        return None
+def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, guess: SineGuess,
+                step_rad_s: float, settings: DriveModelSettings) -> _Found | None:
+    """Step 2 of the module doc from the guess, on every SEARCH_EVERY-th sample, then the
+    best fitted again on all of them."""
     t, th = time[::SEARCH_EVERY], theta[::SEARCH_EVERY]
     best: tuple[DriveFit, _SineModel] | None = None
     for i, cell in enumerate(timing_grid(t, th, guess, candidate_staircases(guess, step_rad_s)
@@ -232,9 +237,19 @@ class FoundStaircaseInput:
         t = np.asarray(time, dtype=float)
         th = np.asarray(theta, dtype=float)
         sigma = noise_sigma(th) if sigma_theta is None else float(sigma_theta)
-        found = _continuous(t, th, sigma, self.step_rad_s, self.settings)
+        guess = sine_guess(t, th)
+        steps = abs(guess.span_rad_s) / self.step_rad_s
+        step_hz = self.step_rad_s / TWO_PI
+        if steps > MAX_STEPS:
+            return DriveFit(False, f"the record's speed changes by about "
+                                   f"{abs(guess.span_rad_s) / TWO_PI:.3g} Hz, {steps:.0f} steps "
+                                   f"of {step_hz:g} Hz: the search takes staircases of at most "
+                                   f"{MAX_STEPS} steps (is the drive's setpoint step "
+                                   f"{step_hz:g} Hz? else state the staircase)")
+        found = None if not steps >= 1 else _continuous(t, th, sigma, guess, self.step_rad_s,
+                                                         self.settings)
         if found is None:
-            return DriveFit(False, f"no staircase of {self.step_rad_s / TWO_PI:g} Hz steps "
+            return DriveFit(False, f"no staircase of {step_hz:g} Hz steps "
                                    "found in the record (its speed changes by less than a "
                                    "step, or no staircase fits)")
         fit, period = None, 0.0
