@@ -42,6 +42,7 @@ GUESS_WINDOW_S = 0.021
 GUESS_T0_STEP_S = 0.004
 GUESS_TE_S = tuple(np.exp(np.linspace(math.log(0.05), math.log(3.0), 60)).tolist())
 GUESS_EVERY = 3
+GUESS_BLOCK = 1_000_000
 #: The timing grid: durations relative to the guess's (~2 % apart: late steps move by a
 #: fraction of the gap between steps), start times [s] relative to the guess's, and two
 #: generic loops (a slow and a fast PI with torque lag, setpoint weight and filter).
@@ -151,17 +152,22 @@ def sine_guess(time: np.ndarray, theta: np.ndarray) -> SineGuess:
     oc = omega - omega.mean()
     starts = np.arange(time[0] - 0.5, time[-1], GUESS_T0_STEP_S)
     best = (math.inf, SineGuess(float(time[0]), 1.0, 0.0, float(omega.mean())))
+    # start times in blocks of GUESS_BLOCK values: the (start, sample) arrays of a long
+    # record would take gigabytes at once (each row is scored on its own: the same result)
+    rows = max(1, GUESS_BLOCK // time.size)
     for te in GUESS_TE_S:
-        x = progress(np.clip((time[None, :] - starts[:, None]) / te, 0.0, 1.0))
-        xm = x.mean(axis=1, keepdims=True)
-        xc = x - xm
-        sxx, sxy = (xc * xc).sum(axis=1), (xc * oc).sum(axis=1)
-        span = np.where(sxx > 0, sxy / np.maximum(sxx, 1e-300), 0.0)
-        sse = float(oc @ oc) - span * sxy
-        i = int(np.argmin(sse))
-        if sse[i] < best[0]:
-            best = (float(sse[i]), SineGuess(float(starts[i]), float(te), float(span[i]),
-                                            float(omega.mean() - span[i] * xm[i, 0])))
+        for lo in range(0, starts.size, rows):
+            s0 = starts[lo:lo + rows]
+            x = progress(np.clip((time[None, :] - s0[:, None]) / te, 0.0, 1.0))
+            xm = x.mean(axis=1, keepdims=True)
+            xc = x - xm
+            sxx, sxy = (xc * xc).sum(axis=1), (xc * oc).sum(axis=1)
+            span = np.where(sxx > 0, sxy / np.maximum(sxx, 1e-300), 0.0)
+            sse = float(oc @ oc) - span * sxy
+            i = int(np.argmin(sse))
+            if sse[i] < best[0]:
+                best = (float(sse[i]), SineGuess(float(s0[i]), float(te), float(span[i]),
+                                                float(omega.mean() - span[i] * xm[i, 0])))
     return best[1]
 
 
