@@ -24,7 +24,7 @@ from measurement.kinematics.drive_model import LoopModel
 from measurement.kinematics.model_fit import DriveModelSettings, fit_model
 from measurement.kinematics.profile_model import _ProfileModel
 from measurement.kinematics.staircase_guess import SineStaircase
-from measurement.kinematics.staircase_search import _SineModel
+from measurement.kinematics.sine_model import SineModel as _SineModel
 
 FPS = 3000.0
 SIGMA = 1e-4
