@@ -160,13 +160,16 @@ def test_measure_bad_options_exit_2(tracks_csv, tmp_path, capsys, args, match):
 
 
 def test_a_tracks_csv_without_tracks_is_named_and_the_option_given(tracks_csv, tmp_path, capsys):
-    """A tracks CSV given as a recording (no --tracks): refused before any reading, naming
-    the input and the option (it said only that no reader could decode it)."""
-    out = tmp_path / "o"
-    assert main(["measure", str(tracks_csv), "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert f"'INPUT' = '{tracks_csv}'" in err and "--tracks" in err
-    assert not out.exists()
+    """A tracks CSV given as a recording (no --tracks), to abu measure and abu track: refused
+    by the recording reader, naming the file and the option (it said only that no reader
+    could decode it)."""
+    for command in ("measure", "track"):
+        out = tmp_path / command
+        assert main([command, str(tracks_csv), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"'{tracks_csv}' is a text file, not a recording" in err, err
+        assert "abu measure --tracks" in err and "Traceback" not in err
+        assert not out.exists()
 
 
 def test_measure_bad_tracks_file_exits_2_and_writes_nothing(tmp_path, capsys):

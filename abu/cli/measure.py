@@ -129,10 +129,6 @@ def cmd_measure(args: argparse.Namespace) -> int:
     d = in_range("--d", _positive("--d", args.d, "m"), 1e-5, 0.1, "m",
                  "ball diameter; the report's is 3e-3 m")
     fps_opt = _positive("--fps", args.fps, "frames/s")
-    if not args.tracks and Path(args.input).suffix.lower() == ".csv" and Path(
-            args.input).is_file():   # a CSV is no recording: most likely 'abu track's tracks
-        raise ParameterError("INPUT", args.input, "a recording (frames); a tracks CSV of "
-                             "'abu track' is measured with --tracks")
     options = _analysis_options(args)
     settings = None if args.tracks else _tracking_settings(args)
     out = Path(args.out)

@@ -70,6 +70,10 @@ def read_recording(path: str | os.PathLike, *, mmap: bool = True) -> Recording:
         return Recording(check_stack(np.ascontiguousarray(frames), info.source),
                          info.source + note, fps_hz=info.fps_hz, fps_source=info.fps_source,
                          bit_depth=info.bit_depth, first_frame_time_s=info.first_frame_time_s)
+    if suffix in (".csv", ".txt", ".json"):   # text: no recording (OpenCV would only fail)
+        raise RecordingError(
+            f"'{p}' is a text file, not a recording (frames); a tracks CSV of 'abu track' is "
+            "measured with 'abu measure --tracks'")
     if suffix in (".png", ".bmp"):
         frame, colour = _read_single_frame(p, 0, None)
         frame, note = _convert(frame[np.newaxis], was_colour=colour)
