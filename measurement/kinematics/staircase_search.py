@@ -135,7 +135,7 @@ def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, guess: SineGu
         if i >= N_FIRST and best is not None and _key(best[0])[1] <= settings.max_rms_ratio:
             break
         model = SineModel(t, cell.drive, cell.stair, cell.te_s, start_span(guess, cell.stair),
-                           settings)
+                          settings)
         fit = fit_model(t, th, model, sigma, settings)
         if "staircase_te_s" in fit.params and (best is None or _key(fit) < _key(best[0])):
             best = (fit, model)
@@ -145,10 +145,8 @@ def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, guess: SineGu
         return None
     if _key(best[0])[1] > settings.max_rms_ratio:
         best = _neighbour_counts(t, th, sigma, best, settings)
-    q, stair = best[0].params, best[1].stair
-    model = SineModel(time, found_drive(q), stair, q["staircase_te_s"],
-                       q["staircase_span_steps"], settings, q["t_off_s"])
-    full = fit_model(time, theta, model, sigma, settings)
+    stair = best[1].stair
+    full = _refit_sine(time, theta, sigma, stair, best[0].params, settings)
     # the fit on all samples, unless it failed or was refused where the search's was not (its
     # residual is not comparable with the search's: other samples)
     use_full = "staircase_te_s" in full.params and (full.accepted or not best[0].accepted)
@@ -167,14 +165,13 @@ def _neighbour_counts(t: np.ndarray, th: np.ndarray, sigma: float,
     the drive's; the grid's cells of the right count started elsewhere (seeds 0, 27 and 1000
     of bench_staircase_search.py: 11 steps for 12, 12 for 11, 11 for 10)."""
     fit, model = best
-    q, stair = fit.params, model.stair
+    q = fit.params
     for dn in (-1, 1):
-        n = stair.n + dn
-        if n < 2:
+        shifted = _count_shifted(model.stair, q["staircase_span_steps"], dn)
+        if shifted is None:
             continue
-        span = min(max(q["staircase_span_steps"] + dn, n + 1e-3), n + 1.0 - 1e-3)
-        other = SineModel(t, found_drive(q), replace(stair, n=n), q["staircase_te_s"], span,
-                           settings, q["t_off_s"])
+        other = SineModel(t, found_drive(q), shifted[0], q["staircase_te_s"], shifted[1],
+                          settings, q["t_off_s"])
         moved = fit_model(t, th, other, sigma, settings)
         if "staircase_te_s" in moved.params and _key(moved) < _key(best[0]):
             best = (moved, other)
@@ -188,11 +185,10 @@ def _recounted(t: np.ndarray, th: np.ndarray, sigma: float, found: _Found, dn: i
     (the found loop made up for the wrong count: from it alone seed 8024's 10 steps stopped
     at 2.5x the noise, from a generic loop at 1.15x), the best again on all samples (None
     where the count is below 2 or every fit failed)."""
-    n = found.stair.n + dn
-    if n < 2:
+    shifted = _count_shifted(found.stair, found.span_steps, dn)
+    if shifted is None:
         return None
-    span = min(max(found.span_steps + dn, n + 1e-3), n + 1.0 - 1e-3)
-    stair = replace(found.stair, n=n)
+    stair, span = shifted
     ts, ths = t[::SEARCH_EVERY], th[::SEARCH_EVERY]
     best = None
     for drive in [found_drive(found.fit.params)] + [Drive(model="pi-lag-weighted", **loop)
@@ -203,15 +199,31 @@ def _recounted(t: np.ndarray, th: np.ndarray, sigma: float, found: _Found, dn: i
             best = fit
     if best is None:
         return None
-    q = best.params
-    fit = fit_model(t, th, SineModel(t, found_drive(q), stair, q["staircase_te_s"],
-                                      q["staircase_span_steps"], settings, q["t_off_s"]),
-                    sigma, settings)
+    fit = _refit_sine(t, th, sigma, stair, best.params, settings)
     if "staircase_te_s" not in fit.params:
         return None
     p = fit.params
     return _Found(replace(stair, t0_s=stair.t0_s + p["t_off_s"]), p["staircase_te_s"],
                   p["staircase_span_steps"], fit, True)
+
+
+def _count_shifted(stair: SineStaircase, span_steps: float, dn: int
+                   ) -> tuple[SineStaircase, float] | None:
+    """``stair`` with ``dn`` steps more and its span [steps] moved with it into [n, n + 1)
+    (None below 2 steps)."""
+    n = stair.n + dn
+    if n < 2:
+        return None
+    return replace(stair, n=n), min(max(span_steps + dn, n + 1e-3), n + 1.0 - 1e-3)
+
+
+def _refit_sine(time: np.ndarray, theta: np.ndarray, sigma: float, stair: SineStaircase,
+                q: dict[str, float], settings: DriveModelSettings) -> DriveFit:
+    """The continuous model over ``stair`` fitted from a fit's parameters ``q`` (its loop,
+    te, span and time offset) to ``time``, ``theta``."""
+    model = SineModel(time, found_drive(q), stair, q["staircase_te_s"],
+                      q["staircase_span_steps"], settings, q["t_off_s"])
+    return fit_model(time, theta, model, sigma, settings)
 
 
 @dataclass(frozen=True)
