@@ -70,7 +70,7 @@ _PROGRESS_TABLE = progress(_X_TABLE)
 
 #: progress_root takes arrays up to this size element by element in Python floats: the fits
 #: ask for a staircase's 4-16 step times at every evaluation, where NumPy's per-call cost
-#: was 8 % of the search's CPU (bench_staircase_search.py seeds 0-7; 2.9x faster a call)
+#: was 8 % of the search's CPU (cProfile, bench_staircase_search.py seeds 0-7)
 _SMALL = 64
 _X_LIST, _PROGRESS_LIST = _X_TABLE.tolist(), _PROGRESS_TABLE.tolist()
 

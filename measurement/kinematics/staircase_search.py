@@ -87,7 +87,7 @@ N_CANDIDATES = 6
 N_PERIODS = 2
 #: The most steps a staircase found may have: step 4's box holds ~3 n^2 sample indices per
 #: duration and span (1000 steps, --step-hz 0.01 on a 10 Hz record, took all of 24 GiB);
-#: true staircases at 3000 frames/s: 30 steps 0.13 GB and 4-12 s, 80 steps 0.5 GB, 14-24 s.
+#: 30 steps 0.13 GB, 80 steps 0.46 GB (benchmarks/bench_search_limits.py --steps 30 80).
 MAX_STEPS = 100
 #: A final fit refused with a residual up to this many times the noise is tried again with
 #: a step fewer and one more (a wrong count leaves a residual near the limit where the fitted
