@@ -234,32 +234,6 @@ def test_a_step_too_small_for_the_search_is_refused_before_it_starts(monkeypatch
         FoundStaircaseInput(step_rad_s=0.05 * TWO_PI).fit(t, th, SIGMA)
 
 
-def test_a_step_count_one_off_near_the_limit_is_tried_again(monkeypatch):
-    """Step 2 made to return the drive's staircase with a step fewer (its refit from the
-    found one, as `_recounted` fits it): steps 3-4 refuse it near the acceptance limit, and
-    the retry with one more step finds the drive's count and is accepted; without the retry
-    (RECOUNT_RMS 0) the record is refused."""
-    from controller.reference import Staircase
-    from measurement.kinematics import staircase_search
-    t, th, alpha, spec = _record(9107, "trail")
-    n_true = len(Staircase(spec.omega0, spec.omega_end, spec.t0, spec.te,
-                           rounding=spec.rounding).step_times)
-    real = staircase_search._continuous
-
-    def one_short(time, theta, sigma, guess, step, settings):
-        found = real(time, theta, sigma, guess, step, settings)
-        assert found.stair.n == n_true
-        return staircase_search._recounted(time, theta, sigma, found, -1, settings)
-    monkeypatch.setattr(staircase_search, "_continuous", one_short)
-    fit = FoundStaircaseInput().fit(t, th, SIGMA)
-    assert fit.accepted, fit.why
-    assert fit.params["staircase_steps"] == n_true
-    assert abs(fit.params["staircase_te_s"] / spec.te - 1.0) < 0.01
-    monkeypatch.setattr(staircase_search, "RECOUNT_RMS", 0.0)
-    fit = FoundStaircaseInput().fit(t, th, SIGMA)
-    assert not fit.accepted and fit.params.get("staircase_steps") == n_true - 1
-
-
 def test_a_drive_that_is_no_staircase_is_refused():
     """A profile drive (smooth acceleration bumps, the benchmark family's other kind): no
     staircase fits it to the noise, so the fit is refused, with the reason."""
