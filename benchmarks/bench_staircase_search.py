@@ -24,7 +24,9 @@ staircase (rounding, step count, every step within 3 frames but for a common shi
 0.3 %), the 95 % bar's coverage of the true
 omega_dot at check times inside the staircase, omega_dot's RMS error against the stated
 staircase's and Savitzky-Golay's (the default), and the CPU time per record (process time,
-one BLAS thread) of the search and of the stated-staircase fit, with their median ratio.
+one BLAS thread) of the search and of the stated-staircase fit, with their median ratio;
+the records accepted only when tried again after a refusal near the limit, with the count's
+change.
 
 Run::
 
@@ -139,6 +141,7 @@ def _one(seed: int) -> dict:
         d = np.subtract(found, stair.step_times)
         right = float(np.max(np.abs(d - np.median(d)))) <= STEP_FRAMES * dt
     row = dict(seed=seed, accepted=bool(fit.accepted), right=right, te_rel=te_rel, cpu=cpu,
+               count_change=p.get("staircase_count_change"),
                cpu_stated=cpu_stated, stated_accepted=bool(stated.accepted),
                why=fit.why[:120], per_frame=per_frame, fps=1.0 / dt,
                te=spec.te, steps=math.floor(span), rounding=spec.rounding,
@@ -178,6 +181,11 @@ def _report(rows: list[dict], label: str) -> None:
         print(f"  CPU a record: median {np.median(cpu):.1f} s (10-90 %: "
               f"{np.percentile(cpu, 10):.1f}-{np.percentile(cpu, 90):.1f} s); "
               f"against the stated staircase's fit: median ratio {med(ratio):.1f}x")
+    again = [f"{r['seed']} (" + ("the same count" if r["count_change"] == 0
+                                 else f"{r['count_change']:+.0f} step") + ")"
+             for r in acc if r["count_change"] is not None]
+    print(f"  accepted when tried again (refused near the limit first): {len(again)}"
+          + (f": {', '.join(again)}" if again else ""))
     for per in sorted({r["per_frame"] for r in rows}):
         sub = [r for r in rows if r["per_frame"] == per]
         sub_acc = [r for r in sub if r["accepted"]]

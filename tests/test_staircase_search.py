@@ -256,6 +256,7 @@ def test_a_step_count_one_off_near_the_limit_is_tried_again(monkeypatch):
     assert fit.params["staircase_steps"] == n_true
     assert abs(fit.params["staircase_te_s"] / spec.te - 1.0) < 0.01
     assert "digital" in fit.loop
+    assert fit.loop.endswith(f"(tried again: {n_true - 1} steps refused near the limit)")
     monkeypatch.setattr(staircase_search, "RECOUNT_RMS", 0.0)
     fit = FoundStaircaseInput().fit(t, th, SIGMA)
     assert not fit.accepted and fit.params.get("staircase_steps") == n_true - 1
@@ -263,39 +264,51 @@ def test_a_step_count_one_off_near_the_limit_is_tried_again(monkeypatch):
 
 def test_another_count_passing_only_step_2s_free_timing_is_not_taken(monkeypatch):
     """The retry's other count must pass with its staircase's timing held (steps 3-4): where
-    only step 2's own fit (te and span free, which can make up for a step) passes, the
-    refusal of the first count stands, with its count (tracked seed 3042 of
-    bench_staircase_search.py: 12 steps for 13 accepted so, its bar holding the true
-    omega_dot at 80 % of the check times)."""
+    only step 2's own fit (te and span free, which can make up for a step) passes, and the
+    search's own steps 3-4 hand it back as the result, the refusal of the first count
+    stands, with its count (tracked seed 3042 of bench_staircase_search.py: 12 steps for 13
+    accepted so, its bar holding the true omega_dot at 80 % of the check times)."""
+    from dataclasses import replace
+    from measurement.kinematics import staircase_search
     from measurement.kinematics.model_fit import DriveFit
+    from measurement.kinematics.sine_model import count_shifted
     t, th, _, _ = _record(9107, "trail")
     near = DriveFit(False, "residual rms 1.9 x the tracking noise (test)", rms_ratio=1.9)
-    first = []
+    real = staircase_search._continuous
+    counts = []
 
-    def finish(self, t, th, sigma, found):
-        if not first:       # the first count: refused near the limit
-            first.append(found.stair.n)
-            return near, 1.0 / FPS
-        found.fit.accepted = True      # step 2's own fit of another count passes
-        return found.fit, 0.0
-    monkeypatch.setattr(FoundStaircaseInput, "_finish", finish)
+    def continuous(*args):      # the first count: step 2's fit refused
+        found = real(*args)
+        counts.append(found.stair.n)
+        return replace(found, fit=DriveFit(False, "step 2 (test)", dict(found.fit.params)))
+
+    def recounted(time, theta, sigma, found, dn, settings):   # step 2 passes another count
+        stair, span = count_shifted(found.stair, found.span_steps, dn)
+        return replace(found, stair=stair, span_steps=span, on_all_samples=True,
+                       fit=DriveFit(True, "", dict(found.fit.params), rms_ratio=1.0))
+    monkeypatch.setattr(staircase_search, "_continuous", continuous)
+    monkeypatch.setattr(staircase_search, "_recounted", recounted)
+    # steps 3-4 refuse every staircase near the limit (the real _finish around them)
+    monkeypatch.setattr(FoundStaircaseInput, "_sample_time_found", lambda *a: (None, 0.0))
+    monkeypatch.setattr(FoundStaircaseInput, "_loop_fit", lambda *a: near)
     fit = FoundStaircaseInput().fit(t, th, SIGMA)
     assert fit is near and not fit.accepted
-    assert fit.params["staircase_steps"] == first[0]
+    assert fit.params["staircase_steps"] == counts[0]
     assert "the staircase found from the record: residual rms 1.9" in fit.why
+    assert "tried again" not in fit.loop
 
 
 def test_the_retry_keeps_the_count_where_it_fits_from_another_loop(monkeypatch):
     """A refused count is tried again from the grid's generic loops before any other count:
-    where both would pass steps 3-4, the count found stands (tracked seed 4042 of
-    bench_staircase_search.py: 11 steps refused in a wrong loop basin, and 10 steps accepted
-    at 1.03x the noise with an omega_dot error of 0.65 rad/s^2, ten times the right
-    staircase's, before the same count was tried again)."""
+    where both would pass steps 3-4, the count found stands, and the loop text says it was
+    tried again (tracked seed 4042 of bench_staircase_search.py: 11 steps refused in a
+    wrong loop basin, and 10 steps accepted at 1.03x the noise with an omega_dot error of
+    0.65 rad/s^2, ten times the right staircase's, before the same count was tried again)."""
     from measurement.kinematics import staircase_search
     from measurement.kinematics.model_fit import DriveFit
     t, th, _, _ = _record(9102, "lead")
     near = DriveFit(False, "residual not white (test)", rms_ratio=1.04)
-    tried = []
+    tried, first = [], []
     real = staircase_search._recounted
 
     def recounted(time, theta, sigma, found, dn, settings):
@@ -304,15 +317,16 @@ def test_the_retry_keeps_the_count_where_it_fits_from_another_loop(monkeypatch):
 
     def finish(self, t, th, sigma, found):
         if not tried:       # the first pass: refused near the limit
+            first.append(found.stair.n)
             return near, 1.0 / FPS
         return DriveFit(True, "", dict(found.fit.params), rms_ratio=1.0), 1.0 / FPS
     monkeypatch.setattr(staircase_search, "_recounted", recounted)
     monkeypatch.setattr(FoundStaircaseInput, "_finish", finish)
     fit = FoundStaircaseInput().fit(t, th, SIGMA)
     assert fit.accepted and tried == [0]
-    first = staircase_search._continuous(t, th, SIGMA, sine_guess(t, th), TWO_PI,
-                                         FoundStaircaseInput().settings)
-    assert fit.params["staircase_steps"] == first.stair.n
+    assert fit.params["staircase_steps"] == first[0]
+    assert fit.params["staircase_count_change"] == 0.0
+    assert fit.loop.endswith("(tried again from another loop)"), fit.loop
 
 
 def test_a_drive_that_is_no_staircase_is_refused():

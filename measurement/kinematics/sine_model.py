@@ -1,7 +1,10 @@
 """The continuous loop over one of the report's staircases whose timing is fitted with it
-(SI): step 2 of :mod:`measurement.kinematics.staircase_search`, and the loop of such a fit
-as a start for the next."""
+(SI): step 2 of :mod:`measurement.kinematics.staircase_search`, the loop of such a fit as a
+start for the next, and the same staircase with its count shifted or refitted on all
+samples."""
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -9,7 +12,7 @@ from abu_model.loop_response import Setpoints
 from controller.drive import Drive
 
 from measurement.kinematics.drive_model import LoopModel, fitted_loop
-from measurement.kinematics.model_fit import DriveModelSettings
+from measurement.kinematics.model_fit import DriveFit, DriveModelSettings, fit_model
 from measurement.kinematics.staircase_guess import SineStaircase
 
 #: The time offset is fitted within +- this [s] and te within this range of its start [-]
@@ -47,4 +50,24 @@ def found_drive(params: dict[str, float], sample_time: float | None = None) -> D
                        min_tau_motor_s=1e-5)
 
 
-__all__ = ["SineModel", "found_drive", "T_OFF_RANGE_S", "TE_RANGE"]
+def count_shifted(stair: SineStaircase, span_steps: float, dn: int
+                  ) -> tuple[SineStaircase, float] | None:
+    """``stair`` with ``dn`` steps more and its span [steps] moved with it into [n, n + 1)
+    (None below 2 steps)."""
+    n = stair.n + dn
+    if n < 2:
+        return None
+    return replace(stair, n=n), min(max(span_steps + dn, n + 1e-3), n + 1.0 - 1e-3)
+
+
+def refit_sine(time: np.ndarray, theta: np.ndarray, sigma: float, stair: SineStaircase,
+               q: dict[str, float], settings: DriveModelSettings) -> DriveFit:
+    """The continuous model over ``stair`` fitted from a fit's parameters ``q`` (its loop,
+    te, span and time offset) to ``time``, ``theta``."""
+    model = SineModel(time, found_drive(q), stair, q["staircase_te_s"],
+                      q["staircase_span_steps"], settings, q["t_off_s"])
+    return fit_model(time, theta, model, sigma, settings)
+
+
+__all__ = ["SineModel", "found_drive", "count_shifted", "refit_sine", "T_OFF_RANGE_S",
+           "TE_RANGE"]

@@ -61,7 +61,8 @@ from measurement.kinematics.drive_model import fit_drive_model
 from measurement.kinematics.estimators import noise_sigma, sample_interval
 from measurement.kinematics.model_fit import DriveFit, DriveModelSettings, fit_model
 from measurement.kinematics.sample_time_search import candidates
-from measurement.kinematics.sine_model import SineModel, found_drive
+from measurement.kinematics.sine_model import (SineModel, count_shifted, found_drive,
+                                                refit_sine)
 from measurement.kinematics.staircase_guess import (GRID_LOOPS, SineGuess, SineStaircase,
                                                     candidate_staircases, start_span,
                                                     sine_guess, timing_grid)
@@ -89,8 +90,9 @@ N_PERIODS = 2
 #: 30 steps 0.13 GB, 80 steps 0.46 GB (benchmarks/bench_search_limits.py --steps 30 80).
 MAX_STEPS = 100
 #: A final fit refused with a residual up to this many times the noise is tried again
-#: (FoundStaircaseInput._recount; a record that is no staircase is refused above: the
-#: profile drives of bench_width_floor.py's seeds 8000-9047 at 3.4-146x).
+#: (FoundStaircaseInput._recount). Records that are no staircase are mostly refused above
+#: it: bench_width_floor.py's profile drives of seeds 8000-8047, 9000-9047 and 14000-14047
+#: at 2.4-146x the noise, one below 3x (seed 14020, still refused after the retry).
 RECOUNT_RMS = 3.0
 
 
@@ -144,7 +146,7 @@ def _continuous(time: np.ndarray, theta: np.ndarray, sigma: float, guess: SineGu
     if _key(best[0])[1] > settings.max_rms_ratio:
         best = _neighbour_counts(t, th, sigma, best, settings)
     stair = best[1].stair
-    full = _refit_sine(time, theta, sigma, stair, best[0].params, settings)
+    full = refit_sine(time, theta, sigma, stair, best[0].params, settings)
     # the fit on all samples, unless it failed or was refused where the search's was not (its
     # residual is not comparable with the search's: other samples)
     use_full = "staircase_te_s" in full.params and (full.accepted or not best[0].accepted)
@@ -165,7 +167,7 @@ def _neighbour_counts(t: np.ndarray, th: np.ndarray, sigma: float,
     fit, model = best
     q = fit.params
     for dn in (-1, 1):
-        shifted = _count_shifted(model.stair, q["staircase_span_steps"], dn)
+        shifted = count_shifted(model.stair, q["staircase_span_steps"], dn)
         if shifted is None:
             continue
         other = SineModel(t, found_drive(q), shifted[0], q["staircase_te_s"], shifted[1],
@@ -179,48 +181,29 @@ def _neighbour_counts(t: np.ndarray, th: np.ndarray, sigma: float,
 def _recounted(t: np.ndarray, th: np.ndarray, sigma: float, found: _Found, dn: int,
                settings: DriveModelSettings) -> _Found | None:
     """Step 2's result with ``dn`` steps more, fitted on every SEARCH_EVERY-th sample from
-    its loop and the grid's generic loops (seed 8024's 10 steps: 2.5x the noise from the
-    found loop, 1.15x from a generic one), the best on all samples (None: below 2 steps or
-    every fit failed)."""
-    shifted = _count_shifted(found.stair, found.span_steps, dn)
+    the grid's generic loops and, for another count, its loop (seed 8024's 10 steps: 2.5x
+    the noise from the found loop, 1.15x from a generic one; for the same count step 2
+    ended there), the best on all samples (None: below 2 steps or every fit failed)."""
+    shifted = count_shifted(found.stair, found.span_steps, dn)
     if shifted is None:
         return None
     stair, span = shifted
     ts, ths = t[::SEARCH_EVERY], th[::SEARCH_EVERY]
     best = None
-    for drive in [found_drive(found.fit.params)] + [Drive(model="pi-lag-weighted", **loop)
-                                                   for loop in GRID_LOOPS]:
+    own = [] if dn == 0 else [found_drive(found.fit.params)]
+    for drive in own + [Drive(model="pi-lag-weighted", **loop) for loop in GRID_LOOPS]:
         fit = fit_model(ts, ths, SineModel(ts, drive, stair, found.te_s, span, settings),
                         sigma, settings)
         if "staircase_te_s" in fit.params and (best is None or _key(fit) < _key(best)):
             best = fit
     if best is None:
         return None
-    fit = _refit_sine(t, th, sigma, stair, best.params, settings)
+    fit = refit_sine(t, th, sigma, stair, best.params, settings)
     if "staircase_te_s" not in fit.params:
         return None
     p = fit.params
     return _Found(replace(stair, t0_s=stair.t0_s + p["t_off_s"]), p["staircase_te_s"],
                   p["staircase_span_steps"], fit, True)
-
-
-def _count_shifted(stair: SineStaircase, span_steps: float, dn: int
-                   ) -> tuple[SineStaircase, float] | None:
-    """``stair`` with ``dn`` steps more and its span [steps] moved with it into [n, n + 1)
-    (None below 2 steps)."""
-    n = stair.n + dn
-    if n < 2:
-        return None
-    return replace(stair, n=n), min(max(span_steps + dn, n + 1e-3), n + 1.0 - 1e-3)
-
-
-def _refit_sine(time: np.ndarray, theta: np.ndarray, sigma: float, stair: SineStaircase,
-                q: dict[str, float], settings: DriveModelSettings) -> DriveFit:
-    """The continuous model over ``stair`` fitted from a fit's parameters ``q`` (its loop,
-    te, span and time offset) to ``time``, ``theta``."""
-    model = SineModel(time, found_drive(q), stair, q["staircase_te_s"],
-                      q["staircase_span_steps"], settings, q["t_off_s"])
-    return fit_model(time, theta, model, sigma, settings)
 
 
 @dataclass(frozen=True)
@@ -286,7 +269,8 @@ class FoundStaircaseInput:
             if other is None:
                 continue
             moved, moved_period = self._finish(t, th, sigma, other)
-            if moved.accepted and moved is not other.fit:
+            if moved.accepted and moved is not other.fit:   # not step 2's own fit
+                moved.params = {**moved.params, "staircase_count_change": float(dn)}
                 return moved, moved_period, other
         return fit, period, found
 
@@ -360,6 +344,10 @@ class FoundStaircaseInput:
         fit.loop = (f"unknown, fitted freely ({clock}) over the staircase found from the "
                     f"record: {found.stair.n} steps of {self.step_rad_s / TWO_PI:g} Hz, "
                     f"rounding {found.stair.rounding}, te {sine['staircase_te_s']:.4g} s")
+        if "staircase_count_change" in fit.params:   # FoundStaircaseInput._recount's
+            dn = int(fit.params["staircase_count_change"])
+            fit.loop += (f" (tried again: {found.stair.n - dn} steps refused near the limit)"
+                         if dn else " (tried again from another loop)")
         if not fit.accepted:
             fit.why = f"the staircase found from the record: {fit.why}"
         return fit
