@@ -85,14 +85,14 @@ def timed(owner, name, label):
             inner[label] = inner.get(label, 0.0) + T() - t
     setattr(owner, name, wrap)
 timed(profile_cache, "slip_displacement", "slip model (episodes)")
-timed(noise_models.Gls, "whiten", "whitening (x inverse factor)")
-timed(noise_models, "leftover_whitener_of", "noise model: inverse factor")
+timed(noise_models.Gls, "whiten", "whitening (forward substitution)")
+timed(noise_models, "leftover_whitener_of", "noise model: Cholesky factor")
 timed(an.inference_mod, "infer_mu", "model inference (infer_mu)")
 timed(an.interval_mod, "slip_interval", "running max + creep bound")
 timed(an.harmonic_mod, "remove_harmonic", "lighting harmonics")
 t = T(); res = pipeline.measure_tracks(mt); out["analysis + uncertainty"] = T() - t
-nested = {"slip model (episodes)", "whitening (x inverse factor)",
-          "noise model: inverse factor"}
+nested = {"slip model (episodes)", "whitening (forward substitution)",
+          "noise model: Cholesky factor"}
 for k, v in inner.items():
     out[("    of which " if k in nested else "  of which ") + k] = v
 d = tempfile.mkdtemp()

@@ -8,6 +8,7 @@ import numpy as np
 from measurement.inference.fit_window import harmonic_design
 from measurement.inference.lighting_models import (DISAGREEMENT_CHI2, bound_shift_chi2,
                                                    union_sets, window_of)
+from measurement.inference.noise_models import TriangularWhitener
 from measurement.inference.types import LOST_ACROSS_SLIP, Inference
 
 N, WIN = 400, slice(50, 350)
@@ -54,7 +55,8 @@ def test_a_bound_one_model_refuses_is_refused_with_its_reason():
 
 def _beta_and_theta(rng):
     theta = np.linspace(0.0, 12.0, N)
-    return theta, 1e-4 * rng.standard_normal(N), np.eye(WIN.stop - WIN.start) / 1e-4
+    return theta, 1e-4 * rng.standard_normal(N), TriangularWhitener(
+        1e-4 * np.eye(WIN.stop - WIN.start))
 
 
 def test_the_statistic_is_zero_for_what_the_window_refits_and_linear_in_the_difference():

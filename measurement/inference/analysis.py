@@ -147,11 +147,12 @@ def _second_lighting_model(time: np.ndarray, theta: np.ndarray, beta: np.ndarray
     if not opt.harmonic or not alt_orders or alt_orders == tuple(opt.harmonic_orders):
         return inf
     alt = _lighting_fit(time, theta, beta, alt_orders, direction, opt)
-    winv = lighting_models.whitener(inf, int(lighting_models.window_of(inf).sum()),
-                                    kin_mod.sample_interval(time), float(harm.residual_sigma))
+    whitener = lighting_models.whitener(inf, int(lighting_models.window_of(inf).sum()),
+                                        kin_mod.sample_interval(time),
+                                        float(harm.residual_sigma))
     chi2 = lighting_models.bound_shift_chi2(inf, harm.beta_clean, alt.beta_clean, theta,
                                             tuple(opt.inference.harmonic_orders),
-                                            opt.inference.theta_harmonics, winv)
+                                            opt.inference.theta_harmonics, whitener)
     if chi2 <= lighting_models.DISAGREEMENT_CHI2:
         return replace(inf, details={**inf.details, "lighting_disagreement_chi2": chi2,
                                      "second_lighting_orders": list(alt_orders)})

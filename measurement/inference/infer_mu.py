@@ -167,9 +167,9 @@ def _fit_noise_model(win: Window, mu_grid: np.ndarray, ratios: np.ndarray,
                            drive)
         if lighting is not None:
             extra = lighting.cov() if extra is None else extra + lighting.cov()
-        winv, info = leftover_whitener(y - fitted, float(t[1] - t[0]), record_residual=rec,
-                                       extra_cov=extra)
-        gls = _Gls(y, x, 0.0, winv)
+        whitener, info = leftover_whitener(y - fitted, float(t[1] - t[0]),
+                                           record_residual=rec, extra_cov=extra)
+        gls = _Gls(y, x, 0.0, whitener)
         if lighting is not None:
             info["lighting_leftover_amp_rad"] = lighting.amplitudes_rad()
     else:

@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from measurement.inference.fit_window import harmonic_design
-from measurement.inference.noise_models import leftover_whitener_of
+from measurement.inference.noise_models import TriangularWhitener, leftover_whitener_of
 from measurement.inference.types import LOST_ACROSS_SLIP, Inference
 
 #: The second lighting model of a ball showing two reflections: orders 1-6 (a two-spot ball's
@@ -57,23 +57,23 @@ def window_of(inference: Inference) -> np.ndarray:
 
 def bound_shift_chi2(inference: Inference, beta_a: np.ndarray, beta_b: np.ndarray,
                      theta: np.ndarray, orders: tuple[int, ...], with_theta: bool,
-                     winv: np.ndarray) -> float:
+                     whitener: TriangularWhitener) -> float:
     """The largest change [chi^2 units] that replacing beta_a by beta_b (two cleaned betas
     [rad]) makes, to first order, in the likelihood-ratio statistic of each bound of
     ``inference`` against its best fit: 2 (W d)^T W (m_best - m_bound), with d the difference
     and the model curves' difference both clear of the window's nuisance columns (offset and
-    ``orders`` of phi = theta + beta_a, generalised least squares), W = ``winv`` the window's
-    whitener. 0 without a bound's curve."""
+    ``orders`` of phi = theta + beta_a, generalised least squares), W the window's
+    ``whitener``. 0 without a bound's curve."""
     window = window_of(inference)
     if not window.any():
         return 0.0
     th = np.asarray(theta, float)[window]
-    xw = winv @ harmonic_design(th, th + np.asarray(beta_a, float)[window], tuple(orders),
-                                with_theta)
+    xw = whitener.columns(harmonic_design(th, th + np.asarray(beta_a, float)[window],
+                                          tuple(orders), with_theta))
     q, _ = np.linalg.qr(xw)
 
     def clear(v: np.ndarray) -> np.ndarray:          # whitened, nuisances projected out
-        vw = winv @ v
+        vw = whitener.columns(v)
         return vw - q @ (q.T @ vw)
 
     d = clear((np.asarray(beta_b, float) - np.asarray(beta_a, float))[window])
@@ -84,14 +84,15 @@ def bound_shift_chi2(inference: Inference, beta_a: np.ndarray, beta_b: np.ndarra
     return max(shifts, default=0.0)
 
 
-def whitener(inference: Inference, n: int, h_s: float, sigma_white_rad: float) -> np.ndarray:
-    """(n, n) inverse Cholesky factor of beta's noise covariance in the set's fit window: its
-    white + exponential leftover model (``details["noise_model"]``), else white noise of
+def whitener(inference: Inference, n: int, h_s: float, sigma_white_rad: float
+             ) -> TriangularWhitener:
+    """The whitener (inverse Cholesky factor) of beta's noise covariance in the set's fit
+    window of ``n`` samples: its white + exponential leftover model (``details["noise_model"]``), else white noise of
     ``sigma_white_rad`` [rad]; ``h_s`` the sample interval [s]."""
     info = inference.details.get("noise_model") or {}
     if all(info.get(k) for k in ("sigma_white_rad", "sigma_leftover_rad", "leftover_tau_s")):
         return leftover_whitener_of(info, n, h_s)
-    return np.eye(n) / max(float(sigma_white_rad), 1e-12)
+    return TriangularWhitener(np.eye(n) * max(float(sigma_white_rad), 1e-12))
 
 
 def _hull(a: float | None, b: float | None, pick) -> float | None:
