@@ -22,12 +22,11 @@ import argparse
 import statistics
 import sys
 import time
-from multiprocessing import Pool
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_args import positive_int  # noqa: E402
+from bench_args import map_jobs, positive_int  # noqa: E402
 from bench_width_floor import summary, tracked  # noqa: E402
 
 from measurement.inference import infer_mu  # noqa: E402
@@ -119,14 +118,7 @@ def main() -> None:
         ap.error(f"--cap {a.cap}: expected at least 256 samples (InferenceOptions)")
     SETTINGS.update(cap=a.cap, repeat=a.repeat)
     t_wall = time.perf_counter()
-    seeds = list(range(a.first, a.first + a.n))
-    if a.jobs > 1:
-        pool = Pool(a.jobs)
-        rows = pool.map(one, seeds, chunksize=1)
-        pool.close()
-        pool.join()
-    else:
-        rows = [one(s) for s in seeds]
+    rows = map_jobs(one, range(a.first, a.first + a.n), a.jobs)
     report(rows, a.cap)
     print(f"seeds {a.first}..{a.first + a.n - 1}: {time.perf_counter() - t_wall:.0f} s wall "
           f"({a.jobs} worker process{'es' if a.jobs > 1 else ''}; CPU times are each "

@@ -42,3 +42,19 @@ def test_positive_int_itself():
     for bad in ("0", "-1", "1.5", "", "nan"):
         with pytest.raises(argparse.ArgumentTypeError):
             positive_int(bad)
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_map_jobs_keeps_the_order_in_one_process_and_in_a_pool():
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        from bench_args import map_jobs
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    want = [x * x for x in range(7)]
+    assert map_jobs(_square, range(7), 1) == want
+    assert map_jobs(_square, range(7), 2) == want
+    assert map_jobs(_square, [], 2) == []
