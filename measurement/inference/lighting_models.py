@@ -87,8 +87,9 @@ def bound_shift_chi2(inference: Inference, beta_a: np.ndarray, beta_b: np.ndarra
 def whitener(inference: Inference, n: int, h_s: float, sigma_white_rad: float
              ) -> TriangularWhitener:
     """The whitener (inverse Cholesky factor) of beta's noise covariance in the set's fit
-    window of ``n`` samples: its white + exponential leftover model (``details["noise_model"]``), else white noise of
-    ``sigma_white_rad`` [rad]; ``h_s`` the sample interval [s]."""
+    window of ``n`` samples: its white + exponential leftover model
+    (``details["noise_model"]``), else white noise of ``sigma_white_rad`` [rad]; ``h_s`` the
+    sample interval [s]."""
     info = inference.details.get("noise_model") or {}
     if all(info.get(k) for k in ("sigma_white_rad", "sigma_leftover_rad", "leftover_tau_s")):
         return leftover_whitener_of(info, n, h_s)

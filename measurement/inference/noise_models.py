@@ -13,6 +13,7 @@ import numpy as np
 #: Rows of a Cholesky factor per step of :class:`TriangularWhitener`'s forward substitution.
 TRIANGLE_BLOCK = 128
 
+
 def noise_level(res: np.ndarray) -> float:
     """Robust white-noise sigma of a residual [rad] (MAD of first differences / sqrt 2)."""
     dr = np.diff(res)
