@@ -10,8 +10,8 @@ times the default analysis of each (``analyse_tracks`` with ``abu measure``'s de
 median of ``--repeat`` in-process runs after a warm-up) beside its peer, the same analysis with
 the window cut to ``--cap`` samples (``InferenceOptions.max_fit_samples``; not the default: it
 loses bounds, README). Printed per recording: the drive kind, the fit window's samples, both
-CPU times and their ratio, and whether the cut moved the interval; then the recordings whose
-window is longer than the cap against the rest::
+CPU times and their ratio, and the interval with and without the cut where the cut moved it;
+then the recordings whose window is longer than the cap against the rest::
 
     OPENBLAS_NUM_THREADS=1 nice python benchmarks/bench_analysis_time.py --first 14000 --n 48 \
         --jobs 2
@@ -74,9 +74,13 @@ def one(seed: int) -> dict:
                 window, bounds = n, (s["mu_low"], s["mu_high"])
             else:
                 bounds_cut = (s["mu_low"], s["mu_high"])
-    return {"seed": seed, "kind": scn.drive.kind, "window": window,
+    return {"seed": seed, "kind": scn.drive.kind, "mu": scn.ball.mu, "window": window,
             "cpu": statistics.median(cpu["default"]), "cpu_cut": statistics.median(cpu["cut"]),
             "moved": bounds != bounds_cut, "bounds": bounds, "bounds_cut": bounds_cut}
+
+
+def _bound(value: float | None) -> str:
+    return "none" if value is None else f"{value:.4g}"
 
 
 def report(rows: list[dict], cap: int) -> None:
@@ -86,9 +90,11 @@ def report(rows: list[dict], cap: int) -> None:
         if "error" in r:
             print(f"{r['seed']:6d}  refused by the tracker (exit {r['error']})")
             continue
+        moved = (f"yes: mu {r['mu']:.4g}, [{_bound(r['bounds'][0])}, "
+                 f"{_bound(r['bounds'][1])}] -> [{_bound(r['bounds_cut'][0])}, "
+                 f"{_bound(r['bounds_cut'][1])}]") if r["moved"] else "no"
         print(f"{r['seed']:6d}  {r['kind']:12s} {r['window']:6d}  {r['cpu']:8.2f} s  "
-              f"{r['cpu_cut']:8.2f} s   {r['cpu'] / r['cpu_cut']:5.2f}  "
-              f"{'yes' if r['moved'] else 'no'}")
+              f"{r['cpu_cut']:8.2f} s   {r['cpu'] / r['cpu_cut']:5.2f}  {moved}")
     ok = [r for r in rows if "error" not in r]
     for label, part in ((f"window over {cap} samples", [r for r in ok if r["window"] > cap]),
                         (f"window up to {cap} samples", [r for r in ok if r["window"] <= cap])):
